@@ -1,0 +1,61 @@
+"""The exporter process: a fleet model fed by the transports and served over HTTP."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass, field
+
+from prometheus_client.registry import CollectorRegistry
+
+from overseer.config import Config
+from overseer.http import OverseerServer
+from overseer.metrics import FleetCollector
+from overseer.model import FleetModel
+from overseer.sources.dds import TRANSPORT as DDS_TRANSPORT
+from overseer.sources.dds import DdsSource
+
+log = logging.getLogger(__name__)
+
+EXPIRY_INTERVAL_SECONDS = 1.0
+
+
+@dataclass
+class Exporter:
+    """The running parts of one exporter; `start` brings them up, `stop` takes them down."""
+
+    config: Config
+    model: FleetModel = field(init=False)
+    server: OverseerServer = field(init=False)
+    sources: list[DdsSource] = field(default_factory=list)
+    _stopping: threading.Event = field(default_factory=threading.Event)
+
+    def __post_init__(self) -> None:
+        self.model = FleetModel(self.config.fleet)
+        registry = CollectorRegistry(auto_describe=True)
+        transports = [DDS_TRANSPORT] if self.config.dds.enabled else []
+        registry.register(FleetCollector(self.model, self.config.metrics.value_key_pattern, transports))
+        self.server = OverseerServer(self.config.web.host_and_port, self.model, registry)
+        if self.config.dds.enabled:
+            self.sources.append(DdsSource(self.config.dds, self.model))
+
+    def start(self) -> None:
+        """Start the transports, the expiry timer and the HTTP server threads."""
+        for source in self.sources:
+            source.start()
+        threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
+        threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
+        log.info("serving on %s", self.server.url)
+
+    def stop(self) -> None:
+        """Stop serving and leave the transports."""
+        self._stopping.set()
+        self.server.shutdown()
+        self.server.server_close()
+        for source in self.sources:
+            source.stop()
+
+    def _expire_loop(self) -> None:
+        while not self._stopping.wait(EXPIRY_INTERVAL_SECONDS):
+            for robot in self.model.expire():
+                log.info("forgot robot %s after %gs of silence", robot, self.config.fleet.expire_after)

@@ -1,0 +1,217 @@
+"""The `overseer` command: `run` the exporter, `simulate` a fleet, or run a `demo` of both on loopback."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from overseer import __version__
+from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_duration
+
+log = logging.getLogger("overseer")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `overseer` console script."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    handler: Any = {"run": _run, "simulate": _simulate, "demo": _demo}[args.command]
+    try:
+        return int(handler(args))
+    except ConfigError as error:
+        print(f"overseer {args.command}: configuration error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="overseer", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"overseer {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run the exporter", description="Serve the fleet's diagnostics.")
+    run.add_argument("--config.file", dest="config_file", metavar="PATH", help="YAML configuration file")
+    _add_exporter_flags(run)
+
+    simulate = commands.add_parser("simulate", help="publish a virtual fleet's diagnostics over DDS")
+    _add_simulator_flags(simulate)
+
+    demo = commands.add_parser("demo", help="run the exporter and a simulated fleet together on loopback")
+    demo.add_argument("--web.listen-address", dest="listen_address", default=f"127.0.0.1:{DEFAULT_PORT}")
+    demo.add_argument("--domain", type=int, default=42, help="DDS domain of the demo (default 42)")
+    demo.add_argument("--robots", type=int, default=6)
+    demo.add_argument("--components", type=int, default=10)
+    demo.add_argument("--log.level", dest="log_level", default="info")
+    return parser
+
+
+def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--web.listen-address", dest="listen_address", metavar="HOST:PORT",
+                        help=f"address to serve on (default :{DEFAULT_PORT})")
+    parser.add_argument("--dds.domain", dest="domains", type=int, action="append", metavar="ID",
+                        help="DDS domain to join; repeat for several (default 0)")
+    parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true", default=None,
+                        help="keep DDS traffic on the loopback interface (tests, demos)")
+    parser.add_argument("--dds.cyclonedds-uri", dest="cyclonedds_uri", metavar="URI",
+                        help="Cyclone DDS configuration (XML or file://)")
+    parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
+    parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
+    parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
+    parser.add_argument("--log.level", dest="log_level", choices=["debug", "info", "warning", "error"])
+
+
+def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robots", type=int, default=3, help="number of robots (default 3)")
+    parser.add_argument("--components", type=int, default=10, help="leaf components per robot (default 10)")
+    parser.add_argument("--warn", type=int, default=1, help="components in WARN per robot (default 1)")
+    parser.add_argument("--error", type=int, default=1, help="components in ERROR per robot (default 1)")
+    parser.add_argument("--rate", type=float, default=1.0, help="publications per second (default 1)")
+    parser.add_argument("--domain", type=int, default=0, help="DDS domain (default 0)")
+    parser.add_argument("--separate-domains", action="store_true",
+                        help="put robot I on domain DOMAIN+I-1 with no namespace instead of namespaces")
+    parser.add_argument("--namespace-prefix", default="robot", help="robot names are PREFIX1..PREFIXN")
+    parser.add_argument("--topic", choices=["diagnostics_agg", "diagnostics"], default="diagnostics_agg")
+    parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--event", action="append", default=[], metavar="T:ROBOT[:COMPONENT]:ACTION",
+                        help="scripted change, e.g. '5:robot1:/Power/Robot Battery:ERROR' or '10:robot2:stop'")
+    parser.add_argument("--log.level", dest="log_level", default="info")
+
+
+def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    overrides: dict[str, Any] = {}
+    if args.listen_address is not None:
+        overrides["web.listen_address"] = args.listen_address
+    if args.domains:
+        overrides["dds.domains"] = list(args.domains)
+    if args.loopback_only:
+        overrides["dds.loopback_only"] = True
+    if args.cyclonedds_uri:
+        overrides["dds.cyclonedds_uri"] = args.cyclonedds_uri
+    for name in ("stale_after", "robot_timeout", "expire_after"):
+        value = getattr(args, name)
+        if value is not None:
+            overrides[f"fleet.{name}"] = parse_duration(value, f"--fleet.{name.replace('_', '-')}")
+    if args.log_level is not None:
+        overrides["log_level"] = args.log_level
+    return overrides
+
+
+def _configure_logging(level: str) -> None:
+    logging.basicConfig(level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def _wait_for_signal() -> None:
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    while not stop.wait(1.0):
+        pass
+
+
+def _run(args: argparse.Namespace) -> int:
+    config = load_config(args.config_file, _exporter_overrides(args))
+    _configure_logging(config.log_level)
+    from overseer.app import Exporter
+
+    try:
+        exporter = Exporter(config)
+    except OSError as error:
+        print(f"overseer run: cannot listen on {config.web.listen_address}: {error.strerror}", file=sys.stderr)
+        return 1
+    exporter.start()
+    _wait_for_signal()
+    exporter.stop()
+    return 0
+
+
+def _simulator_settings(args: argparse.Namespace) -> Any:
+    from overseer.simulate import EventError, SimulatorSettings, parse_event
+
+    try:
+        events = [parse_event(text) for text in args.event]
+    except EventError as error:
+        raise ConfigError(str(error)) from None
+    for name in ("robots", "components"):
+        if getattr(args, name) < 1:
+            raise ConfigError(f"--{name}: must be at least 1, got {getattr(args, name)}")
+    if args.warn < 0 or args.error < 0 or args.warn + args.error > args.components:
+        raise ConfigError(f"--warn and --error: need 0 <= warn + error <= components, got {args.warn} + {args.error}")
+    if not args.rate > 0:
+        raise ConfigError(f"--rate: must be positive, got {args.rate}")
+    return SimulatorSettings(
+        robots=args.robots, components=args.components, warn=args.warn, error=args.error, rate=args.rate,
+        domain=args.domain, separate_domains=args.separate_domains, namespace_prefix=args.namespace_prefix,
+        topic=args.topic, loopback_only=args.loopback_only, events=events,
+    )
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    settings = _simulator_settings(args)
+    _configure_logging(args.log_level)
+    from overseer.simulate import EventError, FleetSimulator
+
+    try:
+        simulator = FleetSimulator(settings)
+    except EventError as error:
+        raise ConfigError(str(error)) from None
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: simulator.stop())
+    print(
+        f"simulating {settings.robots} robots x {settings.components} components at {settings.rate:g} Hz "
+        f"on DDS domain {settings.domain}",
+        flush=True,
+    )
+    simulator.run(args.duration)
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    config = load_config(
+        None,
+        {"web.listen_address": args.listen_address, "dds.domains": [args.domain], "dds.loopback_only": True,
+         "log_level": args.log_level},
+    )
+    _configure_logging(config.log_level)
+    from overseer.app import Exporter
+    from overseer.simulate import FleetSimulator, SimulatorSettings, parse_event
+
+    exporter = Exporter(config)
+    exporter.start()
+    settings = SimulatorSettings(
+        robots=args.robots, components=args.components, warn=1, error=1, domain=args.domain, loopback_only=True,
+        events=[parse_event("20:robot2:/Temp/Sensor1:ERROR"), parse_event("40:robot2:/Temp/Sensor1:OK"),
+                parse_event("30:robot3:stop"), parse_event("60:robot3:start")],
+    )
+    simulator = FleetSimulator(settings)
+    thread = threading.Thread(target=simulator.run, name="simulator", daemon=True)
+    thread.start()
+    url = exporter.server.url
+    print(
+        f"Overseer demo: {settings.robots} simulated robots on DDS domain {args.domain} (loopback only)\n"
+        f"  status page  {url}/\n  metrics      {url}/metrics\n  JSON API     {url}/api/v1/robots\n"
+        "Scripted: robot2 /Temp/Sensor1 ERROR at 20 s (OK at 40 s), robot3 stops at 30 s and returns at 60 s.\n"
+        "Press Ctrl-C to stop.",
+        flush=True,
+    )
+    started = time.monotonic()
+    _wait_for_signal()
+    simulator.stop()
+    thread.join(timeout=5)
+    exporter.stop()
+    log.info("demo ran for %.0fs", time.monotonic() - started)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,272 @@
+"""The exporter's configuration: one dataclass tree, read from YAML and flags, validated at start.
+
+Every error names the offending key and value, so the CLI can fail with one readable line.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from overseer.model import FleetLimits
+
+DEFAULT_PORT = 9849
+DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot be used; the message names the key and the bad value."""
+
+
+@dataclass(frozen=True)
+class DomainConfig:
+    """A DDS domain to join; `robot_name` names a robot whose diagnostics topic has no namespace."""
+
+    id: int
+    robot_name: str | None = None
+
+    @property
+    def unnamespaced_robot(self) -> str:
+        """The robot name for `rt/diagnostics_agg` on this domain."""
+        return self.robot_name or f"domain{self.id}"
+
+
+@dataclass(frozen=True)
+class DdsConfig:
+    """The ROS 2 / DDS transport."""
+
+    enabled: bool = True
+    domains: tuple[DomainConfig, ...] = (DomainConfig(0),)
+    topics: tuple[str, ...] = DIAGNOSTIC_TOPICS
+    prefer_aggregated: bool = True
+    loopback_only: bool = False
+    cyclonedds_uri: str | None = None
+
+
+@dataclass(frozen=True)
+class WebConfig:
+    """The HTTP endpoint."""
+
+    listen_address: str = f":{DEFAULT_PORT}"
+
+    @property
+    def host_and_port(self) -> tuple[str, int]:
+        """The address split into a bind host ('' for all interfaces) and a port."""
+        return parse_listen_address(self.listen_address)
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    """What the /metrics view exports beyond levels."""
+
+    value_keys: tuple[str, ...] = (".*",)
+
+    @property
+    def value_key_pattern(self) -> re.Pattern[str]:
+        """One compiled pattern matching every allowed key-value key in full."""
+        return re.compile("|".join(f"(?:{p})" for p in self.value_keys) or "(?!)")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration."""
+
+    web: WebConfig = field(default_factory=WebConfig)
+    dds: DdsConfig = field(default_factory=DdsConfig)
+    fleet: FleetLimits = field(default_factory=FleetLimits)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    log_level: str = "info"
+
+
+_DURATION_PART = re.compile(r"(\d+(?:\.\d+)?)(ms|s|m|h|d)")
+_DURATION_UNITS = {"ms": 0.001, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+_LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+def parse_duration(value: object, key: str) -> float:
+    """Seconds from a number or a Prometheus-style duration such as `5s`, `1h30m`, `250ms`."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{key}: expected a duration such as 5s, got {value!r}")
+    if isinstance(value, int | float):
+        seconds = float(value)
+    elif isinstance(value, str) and value and _DURATION_PART.sub("", value) == "":
+        seconds = sum(float(n) * _DURATION_UNITS[u] for n, u in _DURATION_PART.findall(value))
+    else:
+        raise ConfigError(f"{key}: expected a duration such as 5s, got {value!r}")
+    if not seconds > 0 or seconds == float("inf"):
+        raise ConfigError(f"{key}: must be a positive duration, got {value!r}")
+    return seconds
+
+
+def parse_listen_address(value: str) -> tuple[str, int]:
+    """Split `host:port` (host may be empty or a bracketed IPv6 address) into host and port."""
+    host, sep, port = value.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ConfigError(f"web.listen_address: expected host:port, got {value!r}")
+    return host.strip("[]"), int(port)
+
+
+def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
+    """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags."""
+    raw: dict[str, Any] = {}
+    if path is not None:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as error:
+            raise ConfigError(f"config.file: cannot read {str(path)!r}: {error.strerror}") from None
+        try:
+            loaded = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ConfigError(f"config.file: {str(path)!r} is not valid YAML: {_first_line(error)}") from None
+        if loaded is not None and not isinstance(loaded, dict):
+            raise ConfigError(f"config.file: expected a mapping at the top of {str(path)!r}")
+        raw = loaded or {}
+    for dotted, value in (overrides or {}).items():
+        section, _, key = dotted.partition(".")
+        target = raw.setdefault(section, {}) if key else raw
+        if not isinstance(target, dict):
+            raise ConfigError(f"{section}: expected a mapping, got {target!r}")
+        target[key or section] = value
+    return config_from_dict(raw)
+
+
+def config_from_dict(raw: dict[str, Any]) -> Config:
+    """Validate a parsed configuration mapping into a `Config`."""
+    _reject_unknown(raw, "", {"web", "dds", "fleet", "metrics", "log_level"})
+    web = _section(raw, "web", {"listen_address"})
+    dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
+    fleet = _section(raw, "fleet", {f.name for f in fields(FleetLimits)})
+    metrics = _section(raw, "metrics", {"value_keys"})
+
+    config = Config()
+    if "listen_address" in web:
+        address = _string(web["listen_address"], "web.listen_address")
+        parse_listen_address(address)
+        config = replace(config, web=WebConfig(address))
+    config = replace(config, dds=_dds_config(dds), fleet=_fleet_limits(fleet), metrics=_metrics_config(metrics))
+    if "log_level" in raw:
+        level = _string(raw["log_level"], "log_level").lower()
+        if level not in _LOG_LEVELS:
+            raise ConfigError(f"log_level: expected one of {', '.join(_LOG_LEVELS)}, got {raw['log_level']!r}")
+        config = replace(config, log_level=level)
+    return config
+
+
+def _dds_config(raw: dict[str, Any]) -> DdsConfig:
+    defaults = DdsConfig()
+    domains = defaults.domains
+    if "domains" in raw:
+        items = raw["domains"]
+        if not isinstance(items, list) or not items:
+            raise ConfigError(f"dds.domains: expected a non-empty list, got {items!r}")
+        domains = tuple(_domain(item, f"dds.domains[{i}]") for i, item in enumerate(items))
+        ids = [d.id for d in domains]
+        if len(set(ids)) != len(ids):
+            raise ConfigError(f"dds.domains: domain ids must be unique, got {ids}")
+    topics = defaults.topics
+    if "topics" in raw:
+        topics = tuple(_string(t, "dds.topics") for t in _list(raw["topics"], "dds.topics"))
+        for topic in topics:
+            if topic not in DIAGNOSTIC_TOPICS:
+                raise ConfigError(f"dds.topics: expected diagnostics_agg or diagnostics, got {topic!r}")
+    uri = raw.get("cyclonedds_uri")
+    return DdsConfig(
+        enabled=_bool(raw.get("enabled", defaults.enabled), "dds.enabled"),
+        domains=domains,
+        topics=topics,
+        prefer_aggregated=_bool(raw.get("prefer_aggregated", defaults.prefer_aggregated), "dds.prefer_aggregated"),
+        loopback_only=_bool(raw.get("loopback_only", defaults.loopback_only), "dds.loopback_only"),
+        cyclonedds_uri=None if uri is None else _string(uri, "dds.cyclonedds_uri"),
+    )
+
+
+def _domain(item: object, key: str) -> DomainConfig:
+    if isinstance(item, int) and not isinstance(item, bool):
+        item = {"id": item}
+    if not isinstance(item, dict):
+        raise ConfigError(f"{key}: expected a domain id or a mapping with id, got {item!r}")
+    _reject_unknown(item, key + ".", {"id", "robot_name"})
+    domain_id = item.get("id")
+    if not isinstance(domain_id, int) or isinstance(domain_id, bool) or not 0 <= domain_id <= 232:
+        raise ConfigError(f"{key}.id: expected a DDS domain id from 0 to 232, got {domain_id!r}")
+    name = item.get("robot_name")
+    return DomainConfig(domain_id, None if name is None else _string(name, f"{key}.robot_name"))
+
+
+def _fleet_limits(raw: dict[str, Any]) -> FleetLimits:
+    values: dict[str, Any] = {}
+    for f in fields(FleetLimits):
+        if f.name not in raw:
+            continue
+        key = f"fleet.{f.name}"
+        if f.name.startswith("max_"):
+            value = raw[f.name]
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
+            values[f.name] = value
+        else:
+            values[f.name] = parse_duration(raw[f.name], key)
+    limits = FleetLimits(**values)
+    if limits.robot_timeout < limits.stale_after:
+        raise ConfigError(
+            f"fleet.robot_timeout: must not be shorter than fleet.stale_after ({limits.stale_after:g}s), "
+            f"got {limits.robot_timeout:g}s"
+        )
+    if limits.expire_after < limits.robot_timeout:
+        raise ConfigError(
+            f"fleet.expire_after: must not be shorter than fleet.robot_timeout ({limits.robot_timeout:g}s), "
+            f"got {limits.expire_after:g}s"
+        )
+    return limits
+
+
+def _metrics_config(raw: dict[str, Any]) -> MetricsConfig:
+    if "value_keys" not in raw:
+        return MetricsConfig()
+    patterns = tuple(_string(p, "metrics.value_keys") for p in _list(raw["value_keys"], "metrics.value_keys"))
+    for pattern in patterns:
+        try:
+            re.compile(pattern)
+        except re.error as error:
+            raise ConfigError(f"metrics.value_keys: {pattern!r} is not a regular expression: {error}") from None
+    return MetricsConfig(patterns)
+
+
+def _section(raw: dict[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:
+    section = raw.get(name) or {}
+    if not isinstance(section, dict):
+        raise ConfigError(f"{name}: expected a mapping, got {section!r}")
+    _reject_unknown(section, name + ".", allowed)
+    return section
+
+
+def _reject_unknown(raw: dict[str, Any], prefix: str, allowed: set[str]) -> None:
+    for key in raw:
+        if key not in allowed:
+            raise ConfigError(f"{prefix}{key}: unknown key (expected one of {', '.join(sorted(allowed))})")
+
+
+def _string(value: object, key: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{key}: expected a non-empty string, got {value!r}")
+    return value
+
+
+def _bool(value: object, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key}: expected true or false, got {value!r}")
+    return value
+
+
+def _list(value: object, key: str) -> list[Any]:
+    if not isinstance(value, list):
+        raise ConfigError(f"{key}: expected a list, got {value!r}")
+    return value
+
+
+def _first_line(error: Exception) -> str:
+    return " ".join(str(error).split())

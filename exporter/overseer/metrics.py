@@ -1,0 +1,141 @@
+"""The /metrics view: one custom collector that turns a fleet snapshot into the metric contract.
+
+Every scrape builds fresh metric families from one snapshot, so a robot that is forgotten simply stops
+appearing, and a scrape never sees half of an update.
+
+    # HELP ros_diagnostics_level Component level: 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+    # TYPE ros_diagnostics_level gauge
+    ros_diagnostics_level{robot="robot1",component="/Power/Robot Battery",hardware_id=""} 0.0
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Iterator
+
+from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+
+from overseer import __version__
+from overseer.model import FleetModel
+
+MESSAGE_RESULTS = ("received", "decode_error", "dropped")
+DROP_REASONS = ("robot_limit", "component_limit", "value_limit", "invalid_level")
+
+_COMPONENT_LABELS = ["robot", "component", "hardware_id"]
+_LEADING_NUMBER = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
+_BOOLEANS = {"true": 1.0, "false": 0.0, "True": 1.0, "False": 0.0}
+
+
+def numeric_value(text: str) -> float | None:
+    """The number a key-value's text carries (`12.5`, `12.5 V`, `True`), or None for other text."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    if text in _BOOLEANS:
+        return _BOOLEANS[text]
+    match = _LEADING_NUMBER.match(text)
+    if match is None:
+        return None
+    value = float(match.group(1))
+    return value if math.isfinite(value) else None
+
+
+class FleetCollector(Collector):
+    """Exports the fleet model as the metric contract of ARCHITECTURE.md."""
+
+    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
+        """Collect from `model`, exporting key-values whose key fully matches `value_keys`."""
+        self._model = model
+        self._value_keys = value_keys
+        self._transports = tuple(transports)
+
+    def describe(self) -> Iterator[Metric]:
+        """The families this collector exports, without taking a snapshot."""
+        yield from self._families()
+
+    def collect(self) -> Iterator[Metric]:
+        """Fresh families from one snapshot of the fleet."""
+        snapshot = self._model.snapshot()
+        (level, robot_level, robot_up, last_message, changes, value, messages, dropped, truncated, build) = (
+            families := self._families()
+        )
+        key_allowed = self._value_keys.fullmatch
+        parsed: dict[str, float | None] = {}
+        for robot in snapshot.robots:
+            name = robot.name
+            up = snapshot.robot_up(robot)
+            robot_up.add_metric([name], 1.0 if up else 0.0)
+            robot_level.add_metric([name], float(snapshot.robot_level(robot)))
+            if robot.last_message is not None:
+                last_message.add_metric([name], robot.last_message)
+            for component in robot.components.values():
+                labels = [name, component.name, component.hardware_id]
+                level.add_metric(labels, float(snapshot.component_level(component, up)))
+                changes.add_metric(labels, float(component.level_changes))
+                for key, text in component.values:
+                    if not key_allowed(key):
+                        continue
+                    if text not in parsed:
+                        parsed[text] = numeric_value(text)
+                    number = parsed[text]
+                    if number is not None:
+                        value.add_metric([*labels, key], number)
+        counts = dict(snapshot.message_counts)
+        for transport in self._transports:
+            for result in MESSAGE_RESULTS:
+                counts.setdefault((transport, result), 0)
+        for (transport, result), count in sorted(counts.items()):
+            messages.add_metric([transport, result], float(count))
+        for reason in DROP_REASONS:
+            dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
+        truncated.add_metric([], float(snapshot.truncated_strings))
+        build.add_metric([__version__], 1.0)
+        yield from families
+
+    @staticmethod
+    def _families() -> tuple[Metric, ...]:
+        return (
+            GaugeMetricFamily(
+                "ros_diagnostics_level", "Component level: 0 OK, 1 WARN, 2 ERROR, 3 STALE.", labels=_COMPONENT_LABELS
+            ),
+            GaugeMetricFamily(
+                "ros_diagnostics_robot_level",
+                "Worst component level of the robot (ERROR > WARN > STALE > OK); 3 while the robot is down.",
+                labels=["robot"],
+            ),
+            GaugeMetricFamily(
+                "ros_diagnostics_robot_up", "1 while the robot's messages arrive within robot_timeout.", labels=["robot"]
+            ),
+            GaugeMetricFamily(
+                "ros_diagnostics_robot_last_message_timestamp_seconds",
+                "Unix time of the robot's last diagnostics message.",
+                labels=["robot"],
+            ),
+            CounterMetricFamily(
+                "ros_diagnostics_level_changes",
+                "Changes of a component's reported level (flapping).",
+                labels=_COMPONENT_LABELS,
+            ),
+            GaugeMetricFamily(
+                "ros_diagnostics_value",
+                "Numeric key-values of a component's status, for the keys the configuration allows.",
+                labels=[*_COMPONENT_LABELS, "key"],
+            ),
+            CounterMetricFamily(
+                "overseer_messages",
+                "Diagnostics messages by transport and result: received, decode_error or dropped.",
+                labels=["transport", "result"],
+            ),
+            CounterMetricFamily(
+                "overseer_statuses_dropped",
+                "Statuses and key-values dropped by the fleet model's caps, by reason.",
+                labels=["reason"],
+            ),
+            CounterMetricFamily(
+                "overseer_strings_truncated", "Names, messages and key-values cut to max_string_length."
+            ),
+            GaugeMetricFamily("overseer_build_info", "Overseer's version; always 1.", labels=["version"]),
+        )

@@ -1,0 +1,233 @@
+"""The live fleet model: robot → component → level, message, hardware_id, key-values, last update.
+
+Writers (the transports) call `apply` with decoded arrays; readers (the views) take a `FleetSnapshot`.
+Robot states are immutable and replaced whole on every message, so a snapshot is a shallow copy taken
+under the one lock, and views read it with no lock held. Staleness and robot up/down are derived from
+the snapshot's time, never stored, so they cannot drift from the clock.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from overseer.levels import Level, level_from_wire, worst
+from overseer.messages import DiagnosticArray
+
+ComponentKey = tuple[str, str]  # (name, hardware_id)
+
+
+@dataclass(frozen=True)
+class FleetLimits:
+    """Time limits and caps that bound what the model keeps."""
+
+    stale_after: float = 5.0
+    robot_timeout: float = 10.0
+    expire_after: float = 3600.0
+    max_robots: int = 10_000
+    max_components_per_robot: int = 1_000
+    max_values_per_component: int = 64
+    max_string_length: int = 1_024
+
+
+@dataclass(frozen=True, slots=True)
+class Component:
+    """The last status a component reported; `level` is the reported level, before staleness."""
+
+    name: str
+    hardware_id: str
+    level: Level
+    message: str
+    values: tuple[tuple[str, str], ...]
+    last_update: float
+    level_changes: int
+    topic: str
+
+
+@dataclass(frozen=True, slots=True)
+class RobotState:
+    """One robot as last seen; replaced whole, never mutated."""
+
+    name: str
+    transport: str
+    last_message: float | None
+    components: Mapping[ComponentKey, Component]
+    discovered_at: float
+    revision: int = 0
+
+    @property
+    def last_seen(self) -> float:
+        """When the robot last sent a message, or when it was discovered if it never did."""
+        return self.discovered_at if self.last_message is None else self.last_message
+
+
+@dataclass(frozen=True)
+class FleetSnapshot:
+    """An immutable view of the fleet at `taken_at`, with the judgements that depend on time."""
+
+    taken_at: float
+    limits: FleetLimits
+    robots: tuple[RobotState, ...]
+    message_counts: Mapping[tuple[str, str], int] = field(default_factory=dict)
+    dropped_statuses: Mapping[str, int] = field(default_factory=dict)
+    truncated_strings: int = 0
+
+    def robot_up(self, robot: RobotState) -> bool:
+        """True while the robot's messages arrive within `robot_timeout`."""
+        return robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
+
+    def component_level(self, component: Component, robot_up: bool) -> Level:
+        """The component's level now: STALE when not updated for `stale_after` or its robot is down."""
+        if not robot_up or self.taken_at - component.last_update > self.limits.stale_after:
+            return Level.STALE
+        return component.level
+
+    def robot_level(self, robot: RobotState) -> Level:
+        """The robot's worst component level by severity order (STALE when the robot is down)."""
+        if not self.robot_up(robot):
+            return Level.STALE
+        return worst(self.component_level(c, True) for c in robot.components.values())
+
+    def find(self, name: str) -> RobotState | None:
+        """The robot called `name`, or None."""
+        for robot in self.robots:
+            if robot.name == name:
+                return robot
+        return None
+
+
+class FleetModel:
+    """The fleet's live state behind one lock; safe to feed from many transport threads."""
+
+    def __init__(self, limits: FleetLimits | None = None, clock: Callable[[], float] = time.time) -> None:
+        """Create an empty fleet bounded by `limits`; `clock` gives unix time (injectable for tests)."""
+        self.limits = limits or FleetLimits()
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._robots: dict[str, RobotState] = {}
+        self._message_counts: Counter[tuple[str, str]] = Counter()
+        self._dropped_statuses: Counter[str] = Counter()
+        self._truncated_strings = 0
+
+    def count_message(self, transport: str, result: str) -> None:
+        """Count one message by its result (received, decode_error, dropped)."""
+        with self._lock:
+            self._message_counts[(transport, result)] += 1
+
+    def register(self, robot: str, transport: str) -> bool:
+        """Make a discovered robot known before its first message; False when the robot cap is reached."""
+        with self._lock:
+            if robot in self._robots:
+                return True
+            if len(self._robots) >= self.limits.max_robots:
+                self._dropped_statuses["robot_limit"] += 1
+                return False
+            self._robots[robot] = RobotState(robot, transport, None, MappingProxyType({}), self._clock())
+            return True
+
+    def apply(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> bool:
+        """Merge one received array into the robot's state; False when anything in it was dropped."""
+        now = self._clock()
+        limits = self.limits
+        max_length = limits.max_string_length
+        truncated = 0
+        prepared: list[tuple[ComponentKey, Level, str, tuple[tuple[str, str], ...]]] = []
+        dropped: Counter[str] = Counter()
+        for status in array.statuses:
+            level = level_from_wire(status.level)
+            if level is None:
+                dropped["invalid_level"] += 1
+                continue
+            name, hardware_id, message = status.name, status.hardware_id, status.message
+            if len(name) > max_length or len(hardware_id) > max_length or len(message) > max_length:
+                truncated += (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
+                name, hardware_id, message = name[:max_length], hardware_id[:max_length], message[:max_length]
+            values = status.values
+            if len(values) > limits.max_values_per_component:
+                dropped["value_limit"] += len(values) - limits.max_values_per_component
+                values = values[: limits.max_values_per_component]
+            if any(len(k) > max_length or len(v) > max_length for k, v in values):
+                truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
+                values = tuple((k[:max_length], v[:max_length]) for k, v in values)
+            prepared.append(((name, hardware_id), level, message, values))
+
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is None:
+                if len(self._robots) >= limits.max_robots:
+                    self._message_counts[(transport, "dropped")] += 1
+                    self._dropped_statuses["robot_limit"] += len(array.statuses)
+                    return False
+                components: dict[ComponentKey, Component] = {}
+                revision, discovered_at = 0, now
+            else:
+                components = dict(state.components)
+                revision, discovered_at = state.revision, state.discovered_at
+            for key, level, message, values in prepared:
+                previous = components.get(key)
+                if previous is None:
+                    if len(components) >= limits.max_components_per_robot:
+                        dropped["component_limit"] += 1
+                        continue
+                    changes = 0
+                else:
+                    changes = previous.level_changes + (previous.level != level)
+                components[key] = Component(key[0], key[1], level, message, values, now, changes, topic)
+            self._robots[robot] = RobotState(
+                robot, transport, now, MappingProxyType(components), discovered_at, revision + 1
+            )
+            self._dropped_statuses.update(dropped)
+            self._truncated_strings += truncated
+            result = "dropped" if dropped else "received"
+            self._message_counts[(transport, result)] += 1
+        return not dropped
+
+    def forget_topic(self, robot: str, topic: str) -> None:
+        """Drop the components a robot reported on `topic` (when it turns out to publish a better one)."""
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is None:
+                return
+            kept = {k: c for k, c in state.components.items() if c.topic != topic}
+            if len(kept) != len(state.components):
+                self._robots[robot] = _replace_components(state, kept)
+
+    def expire(self) -> list[str]:
+        """Forget robots and components silent for `expire_after`; returns the robots forgotten."""
+        now = self._clock()
+        horizon = now - self.limits.expire_after
+        forgotten = []
+        with self._lock:
+            for name, state in list(self._robots.items()):
+                if state.last_seen < horizon:
+                    del self._robots[name]
+                    forgotten.append(name)
+                    continue
+                if any(c.last_update < horizon for c in state.components.values()):
+                    kept = {k: c for k, c in state.components.items() if c.last_update >= horizon}
+                    self._robots[name] = _replace_components(state, kept)
+        return forgotten
+
+    def snapshot(self) -> FleetSnapshot:
+        """An immutable copy of the fleet, taken now."""
+        with self._lock:
+            robots = tuple(self._robots.values())
+            counts = dict(self._message_counts)
+            dropped = dict(self._dropped_statuses)
+            truncated = self._truncated_strings
+        return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated)
+
+
+def _replace_components(state: RobotState, components: dict[ComponentKey, Component]) -> RobotState:
+    return RobotState(
+        state.name,
+        state.transport,
+        state.last_message,
+        MappingProxyType(components),
+        state.discovered_at,
+        state.revision + 1,
+    )

@@ -1,0 +1,163 @@
+"""The ROS 2 transport: join DDS domains with Cyclone DDS, discover robots, read raw diagnostics.
+
+Robots are found on the DDS built-in publication topic: every writer of `rt/<ns>/diagnostics_agg` or
+`rt/<ns>/diagnostics` is robot `<ns>`, so a robot that starts later is picked up with no restart.
+Samples are taken as raw CDR and decoded by `overseer.codec.cdr`, which is faster than the generic
+deserializer and turns a malformed payload into a counted `decode_error` instead of an exception.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+from cyclonedds._clayer import ddspy_take
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.core import InstanceState, Listener, Policy, Qos, SampleState, ViewState
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.sub import DataReader, Subscriber
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from overseer.codec import DecodeError
+from overseer.codec.cdr import decode_diagnostic_array
+from overseer.config import DdsConfig, DomainConfig
+from overseer.model import FleetModel
+from overseer.sources.cyclone_config import loopback_only_config
+from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
+from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
+
+log = logging.getLogger(__name__)
+
+TRANSPORT = "dds"
+DISCOVERY_INTERVAL_SECONDS = 0.2
+_TAKE_BATCH = 64
+_ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
+
+# ROS 2's default QoS profile for topics. Readers stay volatile so they match both volatile
+# and transient-local writers.
+ROS_DEFAULT_QOS = Qos(
+    Policy.Reliability.Reliable(duration(milliseconds=100)),
+    Policy.Durability.Volatile,
+    Policy.History.KeepLast(10),
+)
+
+
+@dataclass
+class _DomainSession:
+    config: DomainConfig
+    domain: Domain | None
+    participant: DomainParticipant
+    subscriber: Subscriber
+    publications: BuiltinDataReader
+    readers: dict[str, DataReader] = field(default_factory=dict)
+    writers: dict[Any, str] = field(default_factory=dict)  # publication key → DDS topic name
+
+
+class DdsSource:
+    """Subscribes to every robot's diagnostics on the configured DDS domains."""
+
+    def __init__(self, config: DdsConfig, model: FleetModel) -> None:
+        """Prepare to feed `model` from the domains in `config`; nothing joins until `start`."""
+        self._config = config
+        self._model = model
+        self._sessions: list[_DomainSession] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        """Join every configured domain and start discovering robots."""
+        xml = loopback_only_config() if self._config.loopback_only else self._config.cyclonedds_uri
+        for domain_config in self._config.domains:
+            domain = Domain(domain_config.id, xml) if xml else None
+            participant = DomainParticipant(domain_config.id)
+            publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+            self._sessions.append(
+                _DomainSession(domain_config, domain, participant, Subscriber(participant), publications)
+            )
+        self._discover()
+        self._thread = threading.Thread(target=self._discovery_loop, name="dds-discovery", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop discovery and leave every domain."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._sessions.clear()
+
+    @property
+    def subscribed_topics(self) -> list[tuple[int, str]]:
+        """(domain id, DDS topic) of every reader created so far."""
+        return [(s.config.id, topic) for s in self._sessions for topic in s.readers]
+
+    def _discovery_loop(self) -> None:
+        while not self._stop.wait(DISCOVERY_INTERVAL_SECONDS):
+            try:
+                self._discover()
+            except Exception:  # discovery must outlive any one bad sample
+                log.exception("DDS discovery failed; retrying")
+
+    def _discover(self) -> None:
+        for session in self._sessions:
+            for sample in session.publications.take(N=256):
+                topic_name = sample.topic_name
+                if topic_name is None:
+                    session.writers.pop(sample.key, None)
+                    continue
+                if parse_dds_topic(topic_name) is None:
+                    continue
+                if sample.type_name != DIAGNOSTIC_ARRAY_TYPE_NAME:
+                    log.warning("ignoring %s on domain %d: type %s", topic_name, session.config.id, sample.type_name)
+                    continue
+                session.writers[sample.key] = topic_name
+                self._subscribe(session, topic_name)
+
+    def _subscribe(self, session: _DomainSession, topic_name: str) -> None:
+        parsed = parse_dds_topic(topic_name)
+        if parsed is None or topic_name in session.readers or parsed.kind not in self._config.topics:
+            return
+        robot = parsed.namespace or session.config.unnamespaced_robot
+        sibling = topic_name[: -len(parsed.kind)] + (RAW if parsed.kind == AGGREGATED else AGGREGATED)
+        if self._config.prefer_aggregated and AGGREGATED in self._config.topics:
+            if parsed.kind == RAW and sibling in session.readers:
+                return
+            if parsed.kind == AGGREGATED and sibling in session.readers:
+                session.readers.pop(sibling).__del__()
+                self._model.forget_topic(robot, sibling)
+        if not self._model.register(robot, TRANSPORT):
+            log.warning("robot cap reached; not following %s on domain %d", topic_name, session.config.id)
+            return
+        topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
+        listener = Listener(on_data_available=self._on_data_callback(robot, topic_name))
+        session.readers[topic_name] = DataReader(session.subscriber, topic, qos=ROS_DEFAULT_QOS, listener=listener)
+        log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
+
+    def _on_data_callback(self, robot: str, topic_name: str) -> Any:
+        model = self._model
+
+        def on_data_available(reader: DataReader) -> None:
+            try:
+                while True:
+                    samples = ddspy_take(reader._ref, _ANY_SAMPLE, _TAKE_BATCH)
+                    if isinstance(samples, int):
+                        log.warning("take on %s failed with DDS error %d", topic_name, samples)
+                        return
+                    for data, info in samples:
+                        if not info.valid_data:
+                            continue
+                        try:
+                            array = decode_diagnostic_array(data)
+                        except DecodeError as error:
+                            model.count_message(TRANSPORT, "decode_error")
+                            log.debug("undecodable sample on %s: %s", topic_name, error)
+                            continue
+                        model.apply(robot, array, TRANSPORT, topic_name)
+                    if len(samples) < _TAKE_BATCH:
+                        return
+            except Exception:  # a callback from the DDS thread must never raise
+                log.exception("failed to process diagnostics from %s", topic_name)
+
+        return on_data_available
