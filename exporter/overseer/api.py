@@ -12,7 +12,9 @@ def robots_document(snapshot: FleetSnapshot) -> dict[str, Any]:
     """GET /api/v1/robots: every robot's summary."""
     return {
         "generated_at": snapshot.taken_at,
-        "robots": [_robot_summary(snapshot, robot) for robot in sorted(snapshot.robots, key=lambda r: r.name)],
+        "robots": [
+            _robot_summary(snapshot, robot) for robot in sorted(snapshot.robots, key=lambda r: r.name)
+        ],
     }
 
 

@@ -56,14 +56,33 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--web.listen-address", dest="listen_address", metavar="HOST:PORT",
-                        help=f"address to serve on (default :{DEFAULT_PORT})")
-    parser.add_argument("--dds.domain", dest="domains", type=int, action="append", metavar="ID",
-                        help="DDS domain to join; repeat for several (default 0)")
-    parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true", default=None,
-                        help="keep DDS traffic on the loopback interface (tests, demos)")
-    parser.add_argument("--dds.cyclonedds-uri", dest="cyclonedds_uri", metavar="URI",
-                        help="Cyclone DDS configuration (XML or file://)")
+    parser.add_argument(
+        "--web.listen-address",
+        dest="listen_address",
+        metavar="HOST:PORT",
+        help=f"address to serve on (default :{DEFAULT_PORT})",
+    )
+    parser.add_argument(
+        "--dds.domain",
+        dest="domains",
+        type=int,
+        action="append",
+        metavar="ID",
+        help="DDS domain to join; repeat for several (default 0)",
+    )
+    parser.add_argument(
+        "--dds.loopback-only",
+        dest="loopback_only",
+        action="store_true",
+        default=None,
+        help="keep DDS traffic on the loopback interface (tests, demos)",
+    )
+    parser.add_argument(
+        "--dds.cyclonedds-uri",
+        dest="cyclonedds_uri",
+        metavar="URI",
+        help="Cyclone DDS configuration (XML or file://)",
+    )
     parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
@@ -77,14 +96,22 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--error", type=int, default=1, help="components in ERROR per robot (default 1)")
     parser.add_argument("--rate", type=float, default=1.0, help="publications per second (default 1)")
     parser.add_argument("--domain", type=int, default=0, help="DDS domain (default 0)")
-    parser.add_argument("--separate-domains", action="store_true",
-                        help="put robot I on domain DOMAIN+I-1 with no namespace instead of namespaces")
+    parser.add_argument(
+        "--separate-domains",
+        action="store_true",
+        help="put robot I on domain DOMAIN+I-1 with no namespace instead of namespaces",
+    )
     parser.add_argument("--namespace-prefix", default="robot", help="robot names are PREFIX1..PREFIXN")
     parser.add_argument("--topic", choices=["diagnostics_agg", "diagnostics"], default="diagnostics_agg")
     parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true")
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
-    parser.add_argument("--event", action="append", default=[], metavar="T:ROBOT[:COMPONENT]:ACTION",
-                        help="scripted change, e.g. '5:robot1:/Power/Robot Battery:ERROR' or '10:robot2:stop'")
+    parser.add_argument(
+        "--event",
+        action="append",
+        default=[],
+        metavar="T:ROBOT[:COMPONENT]:ACTION",
+        help="scripted change, e.g. '5:robot1:/Power/Robot Battery:ERROR' or '10:robot2:stop'",
+    )
     parser.add_argument("--log.level", dest="log_level", default="info")
 
 
@@ -127,7 +154,9 @@ def _run(args: argparse.Namespace) -> int:
     try:
         exporter = Exporter(config)
     except OSError as error:
-        print(f"overseer run: cannot listen on {config.web.listen_address}: {error.strerror}", file=sys.stderr)
+        print(
+            f"overseer run: cannot listen on {config.web.listen_address}: {error.strerror}", file=sys.stderr
+        )
         return 1
     exporter.start()
     _wait_for_signal()
@@ -146,13 +175,23 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         if getattr(args, name) < 1:
             raise ConfigError(f"--{name}: must be at least 1, got {getattr(args, name)}")
     if args.warn < 0 or args.error < 0 or args.warn + args.error > args.components:
-        raise ConfigError(f"--warn and --error: need 0 <= warn + error <= components, got {args.warn} + {args.error}")
+        raise ConfigError(
+            f"--warn and --error: need 0 <= warn + error <= components, got {args.warn} + {args.error}"
+        )
     if not args.rate > 0:
         raise ConfigError(f"--rate: must be positive, got {args.rate}")
     return SimulatorSettings(
-        robots=args.robots, components=args.components, warn=args.warn, error=args.error, rate=args.rate,
-        domain=args.domain, separate_domains=args.separate_domains, namespace_prefix=args.namespace_prefix,
-        topic=args.topic, loopback_only=args.loopback_only, events=events,
+        robots=args.robots,
+        components=args.components,
+        warn=args.warn,
+        error=args.error,
+        rate=args.rate,
+        domain=args.domain,
+        separate_domains=args.separate_domains,
+        namespace_prefix=args.namespace_prefix,
+        topic=args.topic,
+        loopback_only=args.loopback_only,
+        events=events,
     )
 
 
@@ -179,8 +218,12 @@ def _simulate(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     config = load_config(
         None,
-        {"web.listen_address": args.listen_address, "dds.domains": [args.domain], "dds.loopback_only": True,
-         "log_level": args.log_level},
+        {
+            "web.listen_address": args.listen_address,
+            "dds.domains": [args.domain],
+            "dds.loopback_only": True,
+            "log_level": args.log_level,
+        },
     )
     _configure_logging(config.log_level)
     from overseer.app import Exporter
@@ -189,9 +232,18 @@ def _demo(args: argparse.Namespace) -> int:
     exporter = Exporter(config)
     exporter.start()
     settings = SimulatorSettings(
-        robots=args.robots, components=args.components, warn=1, error=1, domain=args.domain, loopback_only=True,
-        events=[parse_event("20:robot2:/Temp/Sensor1:ERROR"), parse_event("40:robot2:/Temp/Sensor1:OK"),
-                parse_event("30:robot3:stop"), parse_event("60:robot3:start")],
+        robots=args.robots,
+        components=args.components,
+        warn=1,
+        error=1,
+        domain=args.domain,
+        loopback_only=True,
+        events=[
+            parse_event("20:robot2:/Temp/Sensor1:ERROR"),
+            parse_event("40:robot2:/Temp/Sensor1:OK"),
+            parse_event("30:robot3:stop"),
+            parse_event("60:robot3:start"),
+        ],
     )
     simulator = FleetSimulator(settings)
     thread = threading.Thread(target=simulator.run, name="simulator", daemon=True)
@@ -200,7 +252,7 @@ def _demo(args: argparse.Namespace) -> int:
     print(
         f"Overseer demo: {settings.robots} simulated robots on DDS domain {args.domain} (loopback only)\n"
         f"  status page  {url}/\n  metrics      {url}/metrics\n  JSON API     {url}/api/v1/robots\n"
-        "Scripted: robot2 /Temp/Sensor1 ERROR at 20 s (OK at 40 s), robot3 stops at 30 s and returns at 60 s.\n"
+        "Scripted: robot2 /Temp/Sensor1 ERROR at 20 s (OK at 40 s), robot3 stops at 30 s, back at 60 s.\n"
         "Press Ctrl-C to stop.",
         flush=True,
     )

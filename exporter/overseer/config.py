@@ -147,11 +147,15 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         address = _string(web["listen_address"], "web.listen_address")
         parse_listen_address(address)
         config = replace(config, web=WebConfig(address))
-    config = replace(config, dds=_dds_config(dds), fleet=_fleet_limits(fleet), metrics=_metrics_config(metrics))
+    config = replace(
+        config, dds=_dds_config(dds), fleet=_fleet_limits(fleet), metrics=_metrics_config(metrics)
+    )
     if "log_level" in raw:
         level = _string(raw["log_level"], "log_level").lower()
         if level not in _LOG_LEVELS:
-            raise ConfigError(f"log_level: expected one of {', '.join(_LOG_LEVELS)}, got {raw['log_level']!r}")
+            raise ConfigError(
+                f"log_level: expected one of {', '.join(_LOG_LEVELS)}, got {raw['log_level']!r}"
+            )
         config = replace(config, log_level=level)
     return config
 
@@ -178,7 +182,9 @@ def _dds_config(raw: dict[str, Any]) -> DdsConfig:
         enabled=_bool(raw.get("enabled", defaults.enabled), "dds.enabled"),
         domains=domains,
         topics=topics,
-        prefer_aggregated=_bool(raw.get("prefer_aggregated", defaults.prefer_aggregated), "dds.prefer_aggregated"),
+        prefer_aggregated=_bool(
+            raw.get("prefer_aggregated", defaults.prefer_aggregated), "dds.prefer_aggregated"
+        ),
         loopback_only=_bool(raw.get("loopback_only", defaults.loopback_only), "dds.loopback_only"),
         cyclonedds_uri=None if uri is None else _string(uri, "dds.cyclonedds_uri"),
     )
@@ -232,7 +238,9 @@ def _metrics_config(raw: dict[str, Any]) -> MetricsConfig:
         try:
             re.compile(pattern)
         except re.error as error:
-            raise ConfigError(f"metrics.value_keys: {pattern!r} is not a regular expression: {error}") from None
+            raise ConfigError(
+                f"metrics.value_keys: {pattern!r} is not a regular expression: {error}"
+            ) from None
     return MetricsConfig(patterns)
 
 

@@ -39,7 +39,9 @@ def leaf_components(count: int) -> list[LeafComponent]:
     for index in range(count):
         group = GROUPS[index % len(GROUPS)]
         number = index // len(GROUPS) + 1
-        leaves.append(LeafComponent(group, number, f"/{group}/{_leaf_name(group, number)}", f"{group.lower()}{number}"))
+        leaves.append(
+            LeafComponent(group, number, f"/{group}/{_leaf_name(group, number)}", f"{group.lower()}{number}")
+        )
     return leaves
 
 
@@ -63,7 +65,9 @@ def leaf_status(leaf: LeafComponent, level: Level) -> DiagnosticStatus:
     return DiagnosticStatus(int(level), leaf.name, message, leaf.hardware_id, _leaf_values(leaf, severity))
 
 
-def aggregated_statuses(leaves: list[LeafComponent], levels: dict[str, Level], silenced: set[str]) -> list[DiagnosticStatus]:
+def aggregated_statuses(
+    leaves: list[LeafComponent], levels: dict[str, Level], silenced: set[str]
+) -> list[DiagnosticStatus]:
     """A robot's /diagnostics_agg content: group statuses (max level of their children) and leaves."""
     statuses = []
     group_levels: dict[str, int] = {}
@@ -91,7 +95,10 @@ def _leaf_values(leaf: LeafComponent, severity: int) -> tuple[tuple[str, str], .
         percentage = (85.0, 18.0, 4.0)[severity]
         return (("voltage", f"{11.0 + percentage / 50:.2f}"), ("percentage", f"{percentage:.1f}"))
     if leaf.group == "Motor":
-        return (("temperature", f"{(45.0, 72.0, 95.0)[severity]:.1f}"), ("current", f"{(1.2, 4.8, 0.0)[severity]:.2f}"))
+        return (
+            ("temperature", f"{(45.0, 72.0, 95.0)[severity]:.1f}"),
+            ("current", f"{(1.2, 4.8, 0.0)[severity]:.2f}"),
+        )
     if leaf.group == "Temp":
         return (("temperature", f"{(38.0 + leaf.number, 71.0, 96.0)[severity]:.1f}"),)
     if leaf.group == "Laser":

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, fields
 
 from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
@@ -54,14 +55,15 @@ class FleetCollector(Collector):
 
     def describe(self) -> Iterator[Metric]:
         """The families this collector exports, without taking a snapshot."""
-        yield from self._families()
+        yield from _Families.create().all()
 
     def collect(self) -> Iterator[Metric]:
         """Fresh families from one snapshot of the fleet."""
         snapshot = self._model.snapshot()
-        (level, robot_level, robot_up, last_message, changes, value, messages, dropped, truncated, build) = (
-            families := self._families()
-        )
+        families = _Families.create()
+        level, robot_level, robot_up = families.level, families.robot_level, families.robot_up
+        last_message, changes, value = families.last_message, families.changes, families.value
+        messages, dropped, truncated = families.messages, families.dropped, families.truncated
         key_allowed = self._value_keys.fullmatch
         parsed: dict[str, float | None] = {}
         for robot in snapshot.robots:
@@ -92,14 +94,37 @@ class FleetCollector(Collector):
         for reason in DROP_REASONS:
             dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
         truncated.add_metric([], float(snapshot.truncated_strings))
-        build.add_metric([__version__], 1.0)
-        yield from families
+        families.build.add_metric([__version__], 1.0)
+        yield from families.all()
 
-    @staticmethod
-    def _families() -> tuple[Metric, ...]:
-        return (
+
+@dataclass(frozen=True)
+class _Families:
+    """Empty metric families of the contract, in exposition order."""
+
+    level: GaugeMetricFamily
+    robot_level: GaugeMetricFamily
+    robot_up: GaugeMetricFamily
+    last_message: GaugeMetricFamily
+    changes: CounterMetricFamily
+    value: GaugeMetricFamily
+    messages: CounterMetricFamily
+    dropped: CounterMetricFamily
+    truncated: CounterMetricFamily
+    build: GaugeMetricFamily
+
+    def all(self) -> tuple[Metric, ...]:
+        """Every family, in exposition order."""
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+    @classmethod
+    def create(cls) -> _Families:
+        """Fresh, empty families."""
+        return cls(
             GaugeMetricFamily(
-                "ros_diagnostics_level", "Component level: 0 OK, 1 WARN, 2 ERROR, 3 STALE.", labels=_COMPONENT_LABELS
+                "ros_diagnostics_level",
+                "Component level: 0 OK, 1 WARN, 2 ERROR, 3 STALE.",
+                labels=_COMPONENT_LABELS,
             ),
             GaugeMetricFamily(
                 "ros_diagnostics_robot_level",
@@ -107,7 +132,9 @@ class FleetCollector(Collector):
                 labels=["robot"],
             ),
             GaugeMetricFamily(
-                "ros_diagnostics_robot_up", "1 while the robot's messages arrive within robot_timeout.", labels=["robot"]
+                "ros_diagnostics_robot_up",
+                "1 while the robot's messages arrive within robot_timeout.",
+                labels=["robot"],
             ),
             GaugeMetricFamily(
                 "ros_diagnostics_robot_last_message_timestamp_seconds",

@@ -78,7 +78,9 @@ class FleetSnapshot:
 
     def robot_up(self, robot: RobotState) -> bool:
         """True while the robot's messages arrive within `robot_timeout`."""
-        return robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
+        return (
+            robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
+        )
 
     def component_level(self, component: Component, robot_up: bool) -> Level:
         """The component's level now: STALE when not updated for `stale_after` or its robot is down."""
@@ -144,7 +146,9 @@ class FleetModel:
                 continue
             name, hardware_id, message = status.name, status.hardware_id, status.message
             if len(name) > max_length or len(hardware_id) > max_length or len(message) > max_length:
-                truncated += (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
+                truncated += (
+                    (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
+                )
                 name, hardware_id, message = name[:max_length], hardware_id[:max_length], message[:max_length]
             values = status.values
             if len(values) > limits.max_values_per_component:

@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, field
 
 from cyclonedds._clayer import ddspy_write
-from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.topic import Topic
 
@@ -23,7 +23,7 @@ from overseer.codec.cdr import encode_diagnostic_array
 from overseer.fleet_design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray
-from overseer.sources.cyclone_config import loopback_only_config
+from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds import ROS_DEFAULT_QOS
 from overseer.sources.dds_types import DiagnosticArray as DdsDiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, dds_topic_name
@@ -107,7 +107,9 @@ class FleetSimulator:
         levels = initial_levels(self.leaves, settings.warn, settings.error)
         self.robots = [
             SimulatedRobot(
-                self.robot_name(i), settings.domain + i if settings.separate_domains else settings.domain, dict(levels)
+                self.robot_name(i),
+                settings.domain + i if settings.separate_domains else settings.domain,
+                dict(levels),
             )
             for i in range(settings.robots)
         ]
@@ -118,9 +120,8 @@ class FleetSimulator:
                 raise EventError(f"event for unknown robot {event.robot!r}")
             if event.component is not None and event.component not in leaf_names:
                 raise EventError(f"event for unknown component {event.component!r}")
-        self._domains: dict[int, Domain] = {}
         self._participants: dict[int, DomainParticipant] = {}
-        self._writers: dict[str, DataWriter] = {}
+        self._writers: dict[str, DataWriter[DdsDiagnosticArray]] = {}
         self._stop = threading.Event()
 
     def robot_name(self, index: int) -> str:
@@ -184,7 +185,6 @@ class FleetSimulator:
         """Delete every writer and participant."""
         self._writers.clear()
         self._participants.clear()
-        self._domains.clear()
 
     def _play(self, event: Event) -> None:
         robot = next(r for r in self.robots if r.name == event.robot)
@@ -214,6 +214,6 @@ class FleetSimulator:
     def _participant(self, domain_id: int) -> DomainParticipant:
         if domain_id not in self._participants:
             if self.settings.loopback_only:
-                self._domains[domain_id] = Domain(domain_id, loopback_only_config())
+                configure_domain(domain_id, loopback_only_config())
             self._participants[domain_id] = DomainParticipant(domain_id)
         return self._participants[domain_id]

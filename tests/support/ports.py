@@ -21,7 +21,7 @@ def free_port() -> int:
 def fresh_domain_id() -> int:
     """A DDS domain id no other test in this run uses; runs in parallel are spread by process id.
 
-    Domain ids map to UDP ports (7400 + 250 × id), so distinct ids keep concurrent tests apart.
+    Domain ids map to UDP ports (7400 + 250 x id), so distinct ids keep concurrent tests apart.
     """
     global _next_domain
     with _lock:

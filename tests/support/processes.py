@@ -15,6 +15,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from support.ports import free_port
 
@@ -69,7 +70,7 @@ class Exporter(RunningProcess):
     def robot(self, name: str) -> dict[str, Any] | None:
         """The API's view of one robot, or None while it is unknown."""
         try:
-            result: dict[str, Any] = self.get_json("/api/v1/robots/" + name)
+            result: dict[str, Any] = self.get_json("/api/v1/robots/" + quote(name, safe="/"))
             return result
         except urllib.error.HTTPError as error:
             if error.code == 404:
@@ -77,7 +78,8 @@ class Exporter(RunningProcess):
             raise
 
 
-def _spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
+def spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
+    """Start `args` in its own session with stdout and stderr going to `log_path`."""
     log = log_path.open("wb")
     try:
         return subprocess.Popen(
@@ -93,20 +95,20 @@ def _spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = Non
 
 @contextmanager
 def running_exporter(
-    tmp_path: Path, domain: int, *extra_args: str, port: int | None = None, timeout: float = 30.0
+    tmp_path: Path, domain: int | None, *extra_args: str, port: int | None = None, timeout: float = 30.0
 ) -> Iterator[Exporter]:
-    """Run `overseer run` on loopback, joined to `domain`, until the block ends."""
+    """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends."""
     port = port or free_port()
     args = [
         *overseer_command(),
         "run",
         f"--web.listen-address=127.0.0.1:{port}",
-        f"--dds.domain={domain}",
+        *([f"--dds.domain={domain}"] if domain is not None else []),
         "--dds.loopback-only",
         *extra_args,
     ]
     log_path = tmp_path / f"exporter-{port}.log"
-    exporter = Exporter(_spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
     try:
         wait_until_healthy(exporter, timeout)
         yield exporter
@@ -133,7 +135,7 @@ def running_simulator(tmp_path: Path, domain: int, *extra_args: str) -> Iterator
     """Run `overseer simulate` on loopback in `domain` until the block ends."""
     args = [*overseer_command(), "simulate", f"--domain={domain}", "--dds.loopback-only", *extra_args]
     log_path = tmp_path / f"simulator-{time.monotonic_ns()}.log"
-    simulator = RunningProcess(_spawn(args, log_path), log_path)
+    simulator = RunningProcess(spawn(args, log_path), log_path)
     try:
         yield simulator
     finally:

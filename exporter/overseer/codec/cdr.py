@@ -49,7 +49,7 @@ def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
     pos += 4
     if count * _MIN_STATUS_BYTES > end - pos:
         raise DecodeError(f"status count {count} runs past the payload")
-    statuses = []
+    statuses: list[DiagnosticStatus] = []
     append = statuses.append
     for _ in range(count):
         if pos >= end:
@@ -65,7 +65,7 @@ def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
         pos += 4
         if value_count * _MIN_KEY_VALUE_BYTES > end - pos:
             raise DecodeError(f"value count {value_count} runs past the payload")
-        values = []
+        values: list[tuple[str, str]] = []
         for _ in range(value_count):
             key, pos = _read_string(payload, pos, end, u32)
             value, pos = _read_string(payload, pos, end, u32)

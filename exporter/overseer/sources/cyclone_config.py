@@ -1,8 +1,15 @@
-"""Cyclone DDS configuration documents."""
+"""Cyclone DDS configuration: the loopback-only document and the process's configured domains."""
 
 from __future__ import annotations
 
+import threading
+
+from cyclonedds.domain import Domain
+
 LOOPBACK_MAX_PARTICIPANTS = 60
+
+_domains: dict[int, tuple[str, Domain]] = {}
+_lock = threading.Lock()
 
 
 def loopback_only_config() -> str:
@@ -13,10 +20,24 @@ def loopback_only_config() -> str:
     """
     return (
         '<CycloneDDS><Domain id="any">'
-        "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces>"
+        '<General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
         "<AllowMulticast>false</AllowMulticast></General>"
         "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
         f"<MaxAutoParticipantIndex>{LOOPBACK_MAX_PARTICIPANTS}</MaxAutoParticipantIndex>"
         '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
         "</Domain></CycloneDDS>"
     )
+
+
+def configure_domain(domain_id: int, config: str) -> None:
+    """Give `domain_id` the Cyclone `config` (XML or URI) for the rest of this process.
+
+    Cyclone accepts one explicit configuration per domain and process, so the exporter and the
+    simulator of `overseer demo` share it; asking for a different one is an error.
+    """
+    with _lock:
+        existing = _domains.get(domain_id)
+        if existing is None:
+            _domains[domain_id] = (config, Domain(domain_id, config))
+        elif existing[0] != config:
+            raise ValueError(f"DDS domain {domain_id} is already configured differently in this process")

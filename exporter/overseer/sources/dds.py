@@ -16,7 +16,7 @@ from typing import Any
 from cyclonedds._clayer import ddspy_take
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
 from cyclonedds.core import InstanceState, Listener, Policy, Qos, SampleState, ViewState
-from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.domain import DomainParticipant
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
@@ -25,7 +25,7 @@ from overseer.codec import DecodeError
 from overseer.codec.cdr import decode_diagnostic_array
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
-from overseer.sources.cyclone_config import loopback_only_config
+from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
@@ -48,11 +48,10 @@ ROS_DEFAULT_QOS = Qos(
 @dataclass
 class _DomainSession:
     config: DomainConfig
-    domain: Domain | None
     participant: DomainParticipant
     subscriber: Subscriber
     publications: BuiltinDataReader
-    readers: dict[str, DataReader] = field(default_factory=dict)
+    readers: dict[str, DataReader[DiagnosticArray]] = field(default_factory=dict)
     writers: dict[Any, str] = field(default_factory=dict)  # publication key → DDS topic name
 
 
@@ -71,11 +70,12 @@ class DdsSource:
         """Join every configured domain and start discovering robots."""
         xml = loopback_only_config() if self._config.loopback_only else self._config.cyclonedds_uri
         for domain_config in self._config.domains:
-            domain = Domain(domain_config.id, xml) if xml else None
+            if xml:
+                configure_domain(domain_config.id, xml)
             participant = DomainParticipant(domain_config.id)
             publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
             self._sessions.append(
-                _DomainSession(domain_config, domain, participant, Subscriber(participant), publications)
+                _DomainSession(domain_config, participant, Subscriber(participant), publications)
             )
         self._discover()
         self._thread = threading.Thread(target=self._discovery_loop, name="dds-discovery", daemon=True)
@@ -110,7 +110,9 @@ class DdsSource:
                 if parse_dds_topic(topic_name) is None:
                     continue
                 if sample.type_name != DIAGNOSTIC_ARRAY_TYPE_NAME:
-                    log.warning("ignoring %s on domain %d: type %s", topic_name, session.config.id, sample.type_name)
+                    log.warning(
+                        "ignoring %s on domain %d: type %s", topic_name, session.config.id, sample.type_name
+                    )
                     continue
                 session.writers[sample.key] = topic_name
                 self._subscribe(session, topic_name)
@@ -131,14 +133,16 @@ class DdsSource:
             log.warning("robot cap reached; not following %s on domain %d", topic_name, session.config.id)
             return
         topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
-        listener = Listener(on_data_available=self._on_data_callback(robot, topic_name))
-        session.readers[topic_name] = DataReader(session.subscriber, topic, qos=ROS_DEFAULT_QOS, listener=listener)
+        listener = Listener(on_data_available=self._on_data_callback(robot, topic_name))  # type: ignore[no-untyped-call]
+        session.readers[topic_name] = DataReader(
+            session.subscriber, topic, qos=ROS_DEFAULT_QOS, listener=listener
+        )
         log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
 
     def _on_data_callback(self, robot: str, topic_name: str) -> Any:
         model = self._model
 
-        def on_data_available(reader: DataReader) -> None:
+        def on_data_available(reader: DataReader[DiagnosticArray]) -> None:
             try:
                 while True:
                     samples = ddspy_take(reader._ref, _ANY_SAMPLE, _TAKE_BATCH)

@@ -1,0 +1,51 @@
+"""A hand-driven ROS 2 diagnostics publisher in the test process, for payloads the simulator never sends."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from cyclonedds._clayer import ddspy_write
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.topic import Topic
+
+from overseer.sources.cyclone_config import configure_domain, loopback_only_config
+from overseer.sources.dds import ROS_DEFAULT_QOS
+from overseer.sources.dds_types import DiagnosticArray
+
+
+class RawDiagnosticsWriter:
+    """Writes serialized payloads as they are onto one diagnostics topic."""
+
+    def __init__(self, writer: DataWriter[DiagnosticArray]) -> None:
+        """Wrap a Cyclone DDS writer of the ROS 2 DiagnosticArray type."""
+        self._writer = writer
+
+    def write(self, payload: bytes) -> int:
+        """Write one serialized sample; returns Cyclone's return code (negative when it refused it)."""
+        padded = payload + b"\x00" * (-len(payload) & 3)
+        result: int = ddspy_write(self._writer._ref, padded)
+        return result
+
+
+_participants: dict[int, DomainParticipant] = {}
+
+
+def _participant(domain_id: int) -> DomainParticipant:
+    if domain_id not in _participants:
+        configure_domain(domain_id, loopback_only_config())
+        _participants[domain_id] = DomainParticipant(domain_id)
+    return _participants[domain_id]
+
+
+@contextmanager
+def raw_diagnostics_writer(domain_id: int, dds_topic: str) -> Iterator[RawDiagnosticsWriter]:
+    """A loopback-only writer on `dds_topic` in `domain_id`, deleted when the block ends."""
+    participant = _participant(domain_id)
+    topic = Topic(participant, dds_topic, DiagnosticArray, qos=ROS_DEFAULT_QOS)
+    writer = DataWriter(participant, topic, qos=ROS_DEFAULT_QOS)
+    try:
+        yield RawDiagnosticsWriter(writer)
+    finally:
+        del writer, topic

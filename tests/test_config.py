@@ -1,0 +1,128 @@
+"""Configuration: YAML and flags, validated at start with errors that name the key and the value."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from overseer.config import ConfigError, DomainConfig, load_config, parse_duration
+from support.processes import overseer_command
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "overseer.yml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_full_file_is_read(tmp_path: Path) -> None:
+    config = load_config(
+        write(
+            tmp_path,
+            """
+web:
+  listen_address: "127.0.0.1:9999"
+dds:
+  domains: [0, {id: 5, robot_name: forklift}]
+  topics: [diagnostics_agg]
+  loopback_only: true
+fleet:
+  stale_after: 3s
+  robot_timeout: 1m
+  expire_after: 2h30m
+  max_robots: 50
+metrics:
+  value_keys: ["temperature", "volt.*"]
+log_level: debug
+""",
+        )
+    )
+    assert config.web.host_and_port == ("127.0.0.1", 9999)
+    assert config.dds.domains == (DomainConfig(0), DomainConfig(5, "forklift"))
+    assert config.dds.domains[0].unnamespaced_robot == "domain0"
+    assert config.dds.topics == ("diagnostics_agg",)
+    assert (config.fleet.stale_after, config.fleet.robot_timeout, config.fleet.expire_after) == (3, 60, 9000)
+    assert config.fleet.max_robots == 50
+    assert config.metrics.value_key_pattern.fullmatch("voltage")
+    assert not config.metrics.value_key_pattern.fullmatch("temperature_max")
+    assert config.log_level == "debug"
+
+
+def test_flags_override_the_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "fleet:\n  stale_after: 3s\n  robot_timeout: 20s\n")
+    config = load_config(path, {"fleet.stale_after": 7.0, "dds.domains": [3, 4]})
+    assert config.fleet.stale_after == 7.0
+    assert [d.id for d in config.dds.domains] == [3, 4]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("fleet:\n  stale_after: soon\n", "fleet.stale_after: expected a duration such as 5s, got 'soon'"),
+        ("fleet:\n  stale_after: -1\n", "fleet.stale_after: must be a positive duration, got -1"),
+        ("fleet:\n  max_robots: 0\n", "fleet.max_robots: expected a positive integer, got 0"),
+        ("fleet:\n  robot_timeout: 1s\n", "fleet.robot_timeout: must not be shorter than fleet.stale_after"),
+        ("dds:\n  domains: [300]\n", "dds.domains[0].id: expected a DDS domain id from 0 to 232, got 300"),
+        ("dds:\n  domains: [1, 1]\n", "dds.domains: domain ids must be unique"),
+        ("dds:\n  topics: [rosout]\n", "dds.topics: expected diagnostics_agg or diagnostics, got 'rosout'"),
+        (
+            "dds:\n  loopback_only: yes please\n",
+            "dds.loopback_only: expected true or false, got 'yes please'",
+        ),
+        ("web:\n  listen_address: nowhere\n", "web.listen_address: expected host:port, got 'nowhere'"),
+        ("fleet:\n  stale_afer: 5s\n", "fleet.stale_afer: unknown key"),
+        ("metrics:\n  value_keys: ['(']\n", "metrics.value_keys: '(' is not a regular expression"),
+        ("log_level: loud\n", "log_level: expected one of debug, info, warning, error, got 'loud'"),
+        ("- a list\n", "expected a mapping at the top"),
+        ("fleet: [\n", "is not valid YAML"),
+    ],
+)
+def test_bad_file_names_key_and_value(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ConfigError) as raised:
+        load_config(write(tmp_path, text))
+    assert message in str(raised.value)
+
+
+def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"config\.file: cannot read"):
+        load_config(tmp_path / "absent.yml")
+
+
+@pytest.mark.parametrize(
+    ("text", "seconds"), [("5s", 5), ("250ms", 0.25), ("1h30m", 5400), (2, 2), ("1d", 86400)]
+)
+def test_durations(text: str | int, seconds: float) -> None:
+    assert parse_duration(text, "k") == seconds
+
+
+def test_run_with_bad_file_exits_nonzero_with_one_line(tmp_path: Path) -> None:
+    path = write(tmp_path, "fleet:\n  expire_after: never\n")
+    result = subprocess.run(
+        [*overseer_command(), "run", f"--config.file={path}"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert result.stderr.splitlines() == [
+        "overseer run: configuration error: fleet.expire_after: expected a duration such as 5s, got 'never'"
+    ]
+
+
+def test_run_with_bad_flag_value_exits_nonzero(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [*overseer_command(), "run", "--fleet.stale-after=fast"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2
+    assert "--fleet.stale-after: expected a duration such as 5s, got 'fast'" in result.stderr
+
+
+def test_simulate_with_bad_event_exits_nonzero() -> None:
+    result = subprocess.run(
+        [*overseer_command(), "simulate", "--event=soon:robot1:stop"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert "time 'soon' is not a number of seconds" in result.stderr

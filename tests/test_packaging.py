@@ -1,0 +1,72 @@
+"""Packaging: the wheel the Dockerfile installs carries the status page and both console scripts.
+
+No Docker engine runs on this machine, so the image itself is not built here; this test builds the
+same package from exactly the files the Dockerfile copies, which is the step that can break.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def dockerfile_copies() -> list[str]:
+    sources: list[str] = []
+    for line in (ROOT / "Dockerfile").read_text().splitlines():
+        if line.startswith("COPY "):
+            sources.extend(line.split()[1:-1])
+    return sources
+
+
+def test_files_the_dockerfile_copies_exist() -> None:
+    sources = dockerfile_copies()
+    assert sources, "the Dockerfile copies nothing"
+    for source in sources:
+        assert (ROOT / source).exists(), source
+
+
+def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_docker_engine(
+    tmp_path: Path,
+) -> None:
+    context = tmp_path / "context"
+    context.mkdir()
+    for source in dockerfile_copies():
+        path = ROOT / source
+        if path.is_dir():
+            shutil.copytree(
+                path, context / source, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+            )
+        else:
+            shutil.copy(path, context / source)
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-build-isolation",
+            "-w",
+            str(tmp_path / "dist"),
+            str(context),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    (wheel,) = (tmp_path / "dist").glob("overseer-*.whl")
+    with zipfile.ZipFile(wheel) as archive:
+        names = set(archive.namelist())
+        entry_points = next(archive.read(n).decode() for n in names if n.endswith("entry_points.txt"))
+    assert "overseer/web/index.html" in names
+    assert "overseer/py.typed" in names
+    assert re.search(r"^overseer = overseer\.cli:main$", entry_points, re.M)
+    assert re.search(r"^check_ros_diagnostics = overseer\.check:main$", entry_points, re.M)
