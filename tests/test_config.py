@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 from pathlib import Path
 
@@ -126,3 +127,31 @@ def test_simulate_with_bad_event_exits_nonzero() -> None:
     )
     assert result.returncode == 2
     assert "time 'soon' is not a number of seconds" in result.stderr
+
+
+def test_simulate_with_a_namespace_dds_cannot_carry_exits_nonzero() -> None:
+    result = subprocess.run(
+        [*overseer_command(), "simulate", '--namespace-prefix=site "a"'],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert "--namespace-prefix: expected ROS name tokens" in result.stderr
+
+
+def test_run_on_a_busy_port_exits_nonzero_with_one_line() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        result = subprocess.run(
+            [*overseer_command(), "run", f"--web.listen-address=127.0.0.1:{port}", "--dds.loopback-only"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    assert result.returncode == 1
+    assert result.stderr.splitlines() == [
+        f"overseer run: cannot listen on 127.0.0.1:{port}: Address already in use"
+    ]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import signal
 import sys
 import threading
@@ -15,6 +16,19 @@ from overseer import __version__
 from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_duration
 
 log = logging.getLogger("overseer")
+
+# The demo fleet: robot1 all OK, robot4 only warnings, the rest as simulated; then a few incidents.
+DEMO_SCRIPT = (
+    "0:robot1:/Laser/Laser2:OK",
+    "0:robot1:/Camera/Cam2:OK",
+    "0:robot4:/Laser/Laser2:OK",
+    "20:robot1:/Temp/Sensor1:ERROR",
+    "40:robot1:/Temp/Sensor1:OK",
+    "30:robot3:stop",
+    "60:robot3:start",
+)
+
+_ROS_NAMESPACE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -178,6 +192,11 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         raise ConfigError(
             f"--warn and --error: need 0 <= warn + error <= components, got {args.warn} + {args.error}"
         )
+    if not _ROS_NAMESPACE.fullmatch(args.namespace_prefix):
+        raise ConfigError(
+            "--namespace-prefix: expected ROS name tokens (letters, digits, _ and /), "
+            f"got {args.namespace_prefix!r}"
+        )
     if not args.rate > 0:
         raise ConfigError(f"--rate: must be positive, got {args.rate}")
     return SimulatorSettings(
@@ -231,6 +250,7 @@ def _demo(args: argparse.Namespace) -> int:
 
     exporter = Exporter(config)
     exporter.start()
+    robots = {f"robot{index}" for index in range(1, args.robots + 1)}
     settings = SimulatorSettings(
         robots=args.robots,
         components=args.components,
@@ -238,12 +258,7 @@ def _demo(args: argparse.Namespace) -> int:
         error=1,
         domain=args.domain,
         loopback_only=True,
-        events=[
-            parse_event("20:robot2:/Temp/Sensor1:ERROR"),
-            parse_event("40:robot2:/Temp/Sensor1:OK"),
-            parse_event("30:robot3:stop"),
-            parse_event("60:robot3:start"),
-        ],
+        events=[event for event in map(parse_event, DEMO_SCRIPT) if event.robot in robots],
     )
     simulator = FleetSimulator(settings)
     thread = threading.Thread(target=simulator.run, name="simulator", daemon=True)
@@ -252,7 +267,7 @@ def _demo(args: argparse.Namespace) -> int:
     print(
         f"Overseer demo: {settings.robots} simulated robots on DDS domain {args.domain} (loopback only)\n"
         f"  status page  {url}/\n  metrics      {url}/metrics\n  JSON API     {url}/api/v1/robots\n"
-        "Scripted: robot2 /Temp/Sensor1 ERROR at 20 s (OK at 40 s), robot3 stops at 30 s, back at 60 s.\n"
+        "Scripted: robot1 /Temp/Sensor1 ERROR at 20 s (OK at 40 s), robot3 stops at 30 s, back at 60 s.\n"
         "Press Ctrl-C to stop.",
         flush=True,
     )
