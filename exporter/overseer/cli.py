@@ -97,6 +97,13 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         metavar="URI",
         help="Cyclone DDS configuration (XML or file://)",
     )
+    parser.add_argument(
+        "--ros1.robot",
+        dest="ros1_robots",
+        action="append",
+        metavar="NAME=MASTER_URI",
+        help="a ROS 1 robot by its master, e.g. robot1=http://10.0.0.5:11311; repeat for several",
+    )
     parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
@@ -139,6 +146,14 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["dds.loopback_only"] = True
     if args.cyclonedds_uri:
         overrides["dds.cyclonedds_uri"] = args.cyclonedds_uri
+    if args.ros1_robots:
+        robots = []
+        for text in args.ros1_robots:
+            name, sep, uri = text.partition("=")
+            if not sep:
+                raise ConfigError(f"--ros1.robot: expected NAME=MASTER_URI, got {text!r}")
+            robots.append({"name": name, "master_uri": uri})
+        overrides["ros1.robots"] = robots
     for name in ("stale_after", "robot_timeout", "expire_after"):
         value = getattr(args, name)
         if value is not None:

@@ -48,6 +48,32 @@ class DdsConfig:
 
 
 @dataclass(frozen=True)
+class Ros1Robot:
+    """A ROS 1 robot: its name and its master's XML-RPC URI."""
+
+    name: str
+    master_uri: str
+    topic: str = "diagnostics_agg"
+
+
+@dataclass(frozen=True)
+class Ros1Config:
+    """The ROS 1 transport: XML-RPC to each robot's master, TCPROS to its publishers."""
+
+    robots: tuple[Ros1Robot, ...] = ()
+    caller_id: str = "/overseer"
+    advertise_host: str | None = None
+    reconnect_min: float = 0.5
+    reconnect_max: float = 30.0
+    poll_interval: float = 5.0
+
+    @property
+    def enabled(self) -> bool:
+        """True when any ROS 1 robot is configured."""
+        return bool(self.robots)
+
+
+@dataclass(frozen=True)
 class WebConfig:
     """The HTTP endpoint."""
 
@@ -77,6 +103,7 @@ class Config:
 
     web: WebConfig = field(default_factory=WebConfig)
     dds: DdsConfig = field(default_factory=DdsConfig)
+    ros1: Ros1Config = field(default_factory=Ros1Config)
     fleet: FleetLimits = field(default_factory=FleetLimits)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     log_level: str = "info"
@@ -136,9 +163,10 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
-    _reject_unknown(raw, "", {"web", "dds", "fleet", "metrics", "log_level"})
+    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "log_level"})
     web = _section(raw, "web", {"listen_address"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
+    ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
     fleet = _section(raw, "fleet", {f.name for f in fields(FleetLimits)})
     metrics = _section(raw, "metrics", {"value_keys"})
 
@@ -148,7 +176,11 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         parse_listen_address(address)
         config = replace(config, web=WebConfig(address))
     config = replace(
-        config, dds=_dds_config(dds), fleet=_fleet_limits(fleet), metrics=_metrics_config(metrics)
+        config,
+        dds=_dds_config(dds),
+        ros1=_ros1_config(ros1),
+        fleet=_fleet_limits(fleet),
+        metrics=_metrics_config(metrics),
     )
     if "log_level" in raw:
         level = _string(raw["log_level"], "log_level").lower()
@@ -188,6 +220,44 @@ def _dds_config(raw: dict[str, Any]) -> DdsConfig:
         loopback_only=_bool(raw.get("loopback_only", defaults.loopback_only), "dds.loopback_only"),
         cyclonedds_uri=None if uri is None else _string(uri, "dds.cyclonedds_uri"),
     )
+
+
+def _ros1_config(raw: dict[str, Any]) -> Ros1Config:
+    defaults = Ros1Config()
+    robots = tuple(
+        _ros1_robot(item, f"ros1.robots[{i}]")
+        for i, item in enumerate(_list(raw.get("robots", []), "ros1.robots"))
+    )
+    names = [robot.name for robot in robots]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"ros1.robots: robot names must be unique, got {names}")
+    values: dict[str, Any] = {}
+    for key in ("reconnect_min", "reconnect_max", "poll_interval"):
+        if key in raw:
+            values[key] = parse_duration(raw[key], f"ros1.{key}")
+    for key in ("caller_id", "advertise_host"):
+        if key in raw:
+            values[key] = _string(raw[key], f"ros1.{key}")
+    config = replace(defaults, robots=robots, **values)
+    if config.reconnect_max < config.reconnect_min:
+        raise ConfigError(
+            f"ros1.reconnect_max: must not be shorter than ros1.reconnect_min, got {config.reconnect_max:g}s"
+        )
+    return config
+
+
+def _ros1_robot(item: object, key: str) -> Ros1Robot:
+    if not isinstance(item, dict):
+        raise ConfigError(f"{key}: expected a mapping with name and master_uri, got {item!r}")
+    _reject_unknown(item, key + ".", {"name", "master_uri", "topic"})
+    name = _string(item.get("name"), f"{key}.name")
+    master_uri = _string(item.get("master_uri"), f"{key}.master_uri")
+    if not re.fullmatch(r"https?://[^/\s:]+(:\d+)?/?", master_uri):
+        raise ConfigError(f"{key}.master_uri: expected http://HOST:PORT, got {master_uri!r}")
+    topic = _string(item.get("topic", "diagnostics_agg"), f"{key}.topic")
+    if topic not in DIAGNOSTIC_TOPICS:
+        raise ConfigError(f"{key}.topic: expected diagnostics_agg or diagnostics, got {topic!r}")
+    return Ros1Robot(name, master_uri, topic)
 
 
 def _domain(item: object, key: str) -> DomainConfig:

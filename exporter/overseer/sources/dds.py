@@ -58,6 +58,8 @@ class _DomainSession:
 class DdsSource:
     """Subscribes to every robot's diagnostics on the configured DDS domains."""
 
+    transport = TRANSPORT
+
     def __init__(self, config: DdsConfig, model: FleetModel) -> None:
         """Prepare to feed `model` from the domains in `config`; nothing joins until `start`."""
         self._config = config
