@@ -46,7 +46,7 @@ def test_components_keep_reported_level_message_and_values() -> None:
         "/Power/Battery says 1",
         (("voltage", "11.2"),),
     )
-    assert snapshot.component_level(component, True) is Level.WARN
+    assert snapshot.component_level(robot, ("/Power/Battery", "bms"), component, True) is Level.WARN
 
 
 def test_robot_level_uses_severity_order() -> None:
@@ -71,9 +71,8 @@ def test_component_goes_stale_after_timeout() -> None:
     clock.now += 0.5
     snapshot = model.snapshot()
     robot = snapshot.robots[0]
-    levels = {
-        c.name: snapshot.component_level(c, snapshot.robot_up(robot)) for c in robot.components.values()
-    }
+    up = snapshot.robot_up(robot)
+    levels = {k[0]: snapshot.component_level(robot, k, c, up) for k, c in robot.components.items()}
     assert levels == {"/a": Level.OK, "/b": Level.STALE}
 
 
@@ -87,7 +86,7 @@ def test_silent_robot_is_down_with_every_component_stale() -> None:
     robot = snapshot.robots[0]
     assert not snapshot.robot_up(robot)
     assert snapshot.robot_level(robot) is Level.STALE
-    assert snapshot.component_level(robot.components[("/a", "")], False) is Level.STALE
+    assert snapshot.component_level(robot, ("/a", ""), robot.components[("/a", "")], False) is Level.STALE
 
 
 def test_silent_robot_is_forgotten_after_expiry() -> None:
@@ -205,3 +204,37 @@ def test_snapshot_is_not_changed_by_later_messages() -> None:
     before = model.snapshot()
     model.apply("r1", array(status("/a", 2), status("/b", 1)), "dds")
     assert {k: c.level for k, c in before.robots[0].components.items()} == {("/a", ""): Level.OK}
+
+
+def test_identical_message_refreshes_every_component_it_carries() -> None:
+    model, clock = make_model(stale_after=5, robot_timeout=60)
+    model.apply("r1", array(status("/a", 1), status("/b", 2)), "dds")
+    clock.now += 4
+    model.apply("r1", array(status("/a", 1)), "dds")  # /b left the message
+    for _ in range(3):
+        clock.now += 4
+        assert model.touch("r1", "dds")
+    snapshot = model.snapshot()
+    robot = snapshot.robots[0]
+    levels = {k[0]: snapshot.component_level(robot, k, c, True) for k, c in robot.components.items()}
+    assert levels == {"/a": Level.WARN, "/b": Level.STALE}
+    assert snapshot.last_update(robot, ("/a", ""), robot.components[("/a", "")]) == clock.now
+    assert snapshot.last_update(robot, ("/b", ""), robot.components[("/b", "")]) == clock.now - 16
+    assert snapshot.message_counts[("dds", "received")] == 5
+
+
+def test_touching_an_unknown_robot_asks_for_a_full_apply() -> None:
+    model, _ = make_model()
+    assert not model.touch("r1", "dds")
+    model.register("r1", "dds")
+    assert not model.touch("r1", "dds")
+
+
+def test_unchanged_components_keep_their_record() -> None:
+    model, _ = make_model()
+    model.apply("r1", array(status("/a", 0, "", v="1"), status("/b", 0)), "dds")
+    before = model.snapshot().robots[0].components
+    model.apply("r1", array(status("/a", 0, "", v="2"), status("/b", 0)), "dds")
+    after = model.snapshot().robots[0].components
+    assert after[("/b", "")] is before[("/b", "")]
+    assert after[("/a", "")].values == (("v", "2"),)

@@ -22,8 +22,8 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
     """GET /api/v1/robots/<robot>: one robot with every component."""
     up = snapshot.robot_up(robot)
     components = []
-    for component in sorted(robot.components.values(), key=lambda c: (c.name, c.hardware_id)):
-        level = snapshot.component_level(component, up)
+    for key, component in sorted(robot.components.items()):
+        level = snapshot.component_level(robot, key, component, up)
         components.append(
             {
                 "name": component.name,
@@ -34,7 +34,7 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
                 "stale": level is Level.STALE,
                 "message": component.message,
                 "values": [{"key": key, "value": value} for key, value in component.values],
-                "last_update": component.last_update,
+                "last_update": snapshot.last_update(robot, key, component),
                 "level_changes": component.level_changes,
             }
         )
@@ -46,8 +46,8 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
 def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]:
     up = snapshot.robot_up(robot)
     counts = dict.fromkeys(("ok", "warn", "error", "stale"), 0)
-    for component in robot.components.values():
-        counts[snapshot.component_level(component, up).name.lower()] += 1
+    for key, component in robot.components.items():
+        counts[snapshot.component_level(robot, key, component, up).name.lower()] += 1
     level = snapshot.robot_level(robot)
     return {
         "robot": robot.name,

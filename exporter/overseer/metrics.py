@@ -73,18 +73,18 @@ class FleetCollector(Collector):
             robot_level.add_metric([name], float(snapshot.robot_level(robot)))
             if robot.last_message is not None:
                 last_message.add_metric([name], robot.last_message)
-            for component in robot.components.values():
+            for key, component in robot.components.items():
                 labels = [name, component.name, component.hardware_id]
-                level.add_metric(labels, float(snapshot.component_level(component, up)))
+                level.add_metric(labels, float(snapshot.component_level(robot, key, component, up)))
                 changes.add_metric(labels, float(component.level_changes))
-                for key, text in component.values:
-                    if not key_allowed(key):
+                for value_key, text in component.values:
+                    if not key_allowed(value_key):
                         continue
                     if text not in parsed:
                         parsed[text] = numeric_value(text)
                     number = parsed[text]
                     if number is not None:
-                        value.add_metric([*labels, key], number)
+                        value.add_metric([*labels, value_key], number)
         counts = dict(snapshot.message_counts)
         for transport in self._transports:
             for result in MESSAGE_RESULTS:

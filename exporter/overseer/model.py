@@ -12,7 +12,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 from overseer.levels import Level, level_from_wire, worst
@@ -36,7 +36,12 @@ class FleetLimits:
 
 @dataclass(frozen=True, slots=True)
 class Component:
-    """The last status a component reported; `level` is the reported level, before staleness."""
+    """The last status a component reported; `level` is the reported level, before staleness.
+
+    `last_update` is when it was last reported in a message other than its robot's latest one; while it
+    is in the latest message, `FleetSnapshot.last_update` gives that message's time instead. This lets
+    an unchanged message refresh a whole robot by replacing one `RobotState`.
+    """
 
     name: str
     hardware_id: str
@@ -58,6 +63,7 @@ class RobotState:
     components: Mapping[ComponentKey, Component]
     discovered_at: float
     revision: int = 0
+    message_keys: frozenset[ComponentKey] = frozenset()  # the components in the latest message
 
     @property
     def last_seen(self) -> float:
@@ -82,9 +88,20 @@ class FleetSnapshot:
             robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
         )
 
-    def component_level(self, component: Component, robot_up: bool) -> Level:
+    @staticmethod
+    def last_update(robot: RobotState, key: ComponentKey, component: Component) -> float:
+        """When the component was last reported."""
+        if robot.last_message is not None and key in robot.message_keys:
+            return robot.last_message
+        return component.last_update
+
+    def component_level(
+        self, robot: RobotState, key: ComponentKey, component: Component, robot_up: bool
+    ) -> Level:
         """The component's level now: STALE when not updated for `stale_after` or its robot is down."""
-        if not robot_up or self.taken_at - component.last_update > self.limits.stale_after:
+        if not robot_up:
+            return Level.STALE
+        if self.taken_at - self.last_update(robot, key, component) > self.limits.stale_after:
             return Level.STALE
         return component.level
 
@@ -92,7 +109,7 @@ class FleetSnapshot:
         """The robot's worst component level by severity order (STALE when the robot is down)."""
         if not self.robot_up(robot):
             return Level.STALE
-        return worst(self.component_level(c, True) for c in robot.components.values())
+        return worst(self.component_level(robot, k, c, True) for k, c in robot.components.items())
 
     def find(self, name: str) -> RobotState | None:
         """The robot called `name`, or None."""
@@ -130,6 +147,25 @@ class FleetModel:
                 return False
             self._robots[robot] = RobotState(robot, transport, None, MappingProxyType({}), self._clock())
             return True
+
+    def touch(self, robot: str, transport: str) -> bool:
+        """Record a message identical to the robot's last one; False when it must be applied in full."""
+        now = self._clock()
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is None or state.last_message is None:
+                return False
+            self._robots[robot] = RobotState(
+                robot,
+                transport,
+                now,
+                state.components,
+                state.discovered_at,
+                state.revision,
+                state.message_keys,
+            )
+            self._message_counts[(transport, "received")] += 1
+        return True
 
     def apply(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> bool:
         """Merge one received array into the robot's state; False when anything in it was dropped."""
@@ -171,18 +207,37 @@ class FleetModel:
             else:
                 components = dict(state.components)
                 revision, discovered_at = state.revision, state.discovered_at
+            message_keys = set()
             for key, level, message, values in prepared:
                 previous = components.get(key)
                 if previous is None:
                     if len(components) >= limits.max_components_per_robot:
                         dropped["component_limit"] += 1
                         continue
-                    changes = 0
-                else:
-                    changes = previous.level_changes + (previous.level != level)
-                components[key] = Component(key[0], key[1], level, message, values, now, changes, topic)
+                    components[key] = Component(key[0], key[1], level, message, values, now, 0, topic)
+                elif (
+                    previous.level is not level
+                    or previous.message != message
+                    or previous.values != values
+                    or previous.topic != topic
+                ):
+                    changes = previous.level_changes + (previous.level is not level)
+                    components[key] = Component(key[0], key[1], level, message, values, now, changes, topic)
+                message_keys.add(key)
+            if state is not None and state.last_message is not None:
+                # Components missing from this message keep the time of the last message that had them.
+                for key in state.message_keys.difference(message_keys):
+                    left = components.get(key)
+                    if left is not None:
+                        components[key] = replace(left, last_update=state.last_message)
             self._robots[robot] = RobotState(
-                robot, transport, now, MappingProxyType(components), discovered_at, revision + 1
+                robot,
+                transport,
+                now,
+                MappingProxyType(components),
+                discovered_at,
+                revision + 1,
+                frozenset(message_keys),
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
@@ -211,8 +266,9 @@ class FleetModel:
                     del self._robots[name]
                     forgotten.append(name)
                     continue
-                if any(c.last_update < horizon for c in state.components.values()):
-                    kept = {k: c for k, c in state.components.items() if c.last_update >= horizon}
+                last_update = FleetSnapshot.last_update
+                if any(last_update(state, k, c) < horizon for k, c in state.components.items()):
+                    kept = {k: c for k, c in state.components.items() if last_update(state, k, c) >= horizon}
                     self._robots[name] = _replace_components(state, kept)
         return forgotten
 
@@ -234,4 +290,5 @@ def _replace_components(state: RobotState, components: dict[ComponentKey, Compon
         MappingProxyType(components),
         state.discovered_at,
         state.revision + 1,
+        state.message_keys.intersection(components),
     )
