@@ -1,0 +1,97 @@
+"""Another vendor's DDS: a Fast DDS publisher (as a Jazzy robot on rmw_fastrtps_cpp) seen by the exporter.
+
+Fast DDS matches readers and writers by type name only, so this is the test that fails when a type
+name is wrong, which Cyclone-to-Cyclone tests cannot catch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fastdds_build import build_fastdds_publisher
+from support.processes import RunningProcess, running_exporter, spawn, wait_for
+
+BUILD_DIR = Path(__file__).resolve().parents[1] / ".cache" / "fastdds-build"
+
+STATUSES = [
+    "0|/Power/Robot Battery|Charge OK|bms|voltage=12.6;percentage=88",
+    "1|/Temp/Sensor1|Température élevée ☀|temp1|temperature=71.5",
+    "2|/Camera/Cam1|No frames received|cam1|fps=0",
+    "3|/Laser|Stale|",
+]
+
+
+@pytest.fixture(scope="session")
+def fastdds_publisher() -> Path:
+    """The Fast DDS publisher, built once per checkout from Debian's fastddsgen and libfastrtps-dev."""
+    return build_fastdds_publisher(BUILD_DIR)
+
+
+@contextmanager
+def publishing(executable: Path, tmp_path: Path, domain: int, topic: str) -> Iterator[RunningProcess]:
+    args = [str(executable), "--domain", str(domain), "--topic", topic, "--rate", "4"]
+    for status in STATUSES:
+        args += ["--status", status]
+    publisher = RunningProcess(spawn(args, tmp_path / "fastdds.log"), tmp_path / "fastdds.log")
+    try:
+        yield publisher
+    finally:
+        assert publisher.stop() == 0, publisher.log()
+
+
+def components(robot: dict[str, Any]) -> dict[str, tuple[str, str, str, list[dict[str, str]]]]:
+    return {c["name"]: (c["state"], c["message"], c["hardware_id"], c["values"]) for c in robot["components"]}
+
+
+def test_fastdds_robot_shows_up_with_exact_statuses(
+    fastdds_publisher: Path, tmp_path: Path, dds_domain: int
+) -> None:
+    with (
+        running_exporter(tmp_path, dds_domain) as exporter,
+        publishing(fastdds_publisher, tmp_path, dds_domain, "rt/fastbot/diagnostics_agg"),
+    ):
+        robot = wait_for(
+            lambda: (r := exporter.robot("fastbot")) and r["up"] and len(r["components"]) == 4 and r,
+            60,
+            message="fastbot's four components",
+        )
+    assert robot["state"] == "ERROR"
+    assert components(robot) == {
+        "/Power/Robot Battery": (
+            "OK",
+            "Charge OK",
+            "bms",
+            [{"key": "voltage", "value": "12.6"}, {"key": "percentage", "value": "88"}],
+        ),
+        "/Temp/Sensor1": ("WARN", "Température élevée ☀", "temp1", [{"key": "temperature", "value": "71.5"}]),
+        "/Camera/Cam1": ("ERROR", "No frames received", "cam1", [{"key": "fps", "value": "0"}]),
+        "/Laser": ("STALE", "Stale", "", []),
+    }
+
+
+def test_fastdds_robot_in_nested_namespace(fastdds_publisher: Path, tmp_path: Path, dds_domain: int) -> None:
+    with (
+        running_exporter(tmp_path, dds_domain) as exporter,
+        publishing(fastdds_publisher, tmp_path, dds_domain, "rt/site_b/fastbot7/diagnostics_agg"),
+    ):
+        wait_for(lambda: (r := exporter.robot("site_b/fastbot7")) and r["up"], 60, message="site_b/fastbot7")
+        metrics = exporter.get("/metrics").decode()
+    assert 'ros_diagnostics_robot_level{robot="site_b/fastbot7"} 2.0' in metrics
+
+
+def test_fastdds_robot_without_namespace_is_named_by_config(
+    fastdds_publisher: Path, tmp_path: Path, dds_domain: int
+) -> None:
+    config = tmp_path / "overseer.yml"
+    config.write_text(f"dds:\n  domains:\n    - {{id: {dds_domain}, robot_name: forklift}}\n")
+    with (
+        running_exporter(tmp_path, None, f"--config.file={config}") as exporter,
+        publishing(fastdds_publisher, tmp_path, dds_domain, "rt/diagnostics_agg"),
+    ):
+        robot = wait_for(lambda: (r := exporter.robot("forklift")) and r["up"] and r, 60, message="forklift")
+    assert robot["counts"] == {"ok": 1, "warn": 1, "error": 1, "stale": 1}
