@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.config import Config
+from overseer.exposition import FleetExposition
 from overseer.http import OverseerServer
 from overseer.metrics import FleetCollector
 from overseer.model import FleetModel
-from overseer.sources.dds import TRANSPORT as DDS_TRANSPORT
-from overseer.sources.dds import DdsSource
+from overseer.sources import Source
 
 log = logging.getLogger(__name__)
 
@@ -27,17 +27,25 @@ class Exporter:
     config: Config
     model: FleetModel = field(init=False)
     server: OverseerServer = field(init=False)
-    sources: list[DdsSource] = field(default_factory=list)
+    sources: list[Source] = field(default_factory=list)
     _stopping: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
         self.model = FleetModel(self.config.fleet)
-        registry = CollectorRegistry(auto_describe=True)
-        transports = [DDS_TRANSPORT] if self.config.dds.enabled else []
-        registry.register(FleetCollector(self.model, self.config.metrics.value_key_pattern, transports))
-        self.server = OverseerServer(self.config.web.host_and_port, self.model, registry)
         if self.config.dds.enabled:
+            from overseer.sources.dds import DdsSource
+
             self.sources.append(DdsSource(self.config.dds, self.model))
+        if self.config.ros1.enabled:
+            from overseer.sources.ros1 import Ros1Source
+
+            self.sources.append(Ros1Source(self.config.ros1, self.model))
+        registry = CollectorRegistry(auto_describe=True)
+        transports = [source.transport for source in self.sources]
+        value_keys = self.config.metrics.value_key_pattern
+        registry.register(FleetCollector(self.model, value_keys, transports))
+        exposition = FleetExposition(self.model, value_keys, transports)
+        self.server = OverseerServer(self.config.web.host_and_port, self.model, registry, exposition)
 
     def start(self) -> None:
         """Start the transports, the expiry timer and the HTTP server threads."""

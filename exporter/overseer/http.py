@@ -16,6 +16,8 @@ from prometheus_client.exposition import choose_encoder
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.api import robot_document, robots_document
+from overseer.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
+from overseer.exposition import FleetExposition
 from overseer.model import FleetModel
 
 log = logging.getLogger(__name__)
@@ -31,12 +33,19 @@ class OverseerServer(ThreadingHTTPServer):
     daemon_threads = True
     request_queue_size = 64
 
-    def __init__(self, address: tuple[str, int], model: FleetModel, registry: CollectorRegistry) -> None:
+    def __init__(
+        self,
+        address: tuple[str, int],
+        model: FleetModel,
+        registry: CollectorRegistry,
+        exposition: FleetExposition,
+    ) -> None:
         """Bind to `address` ('' host for every interface; IPv6 when the host has a colon)."""
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
         self.model = model
         self.registry = registry
+        self.exposition = exposition
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
         self.status_page = resources.files("overseer.web").joinpath("index.html").read_bytes()
         super().__init__(address, _Handler)
@@ -91,8 +100,12 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(200, robot_document(snapshot, robot), head_only)
 
     def _metrics(self, head_only: bool) -> None:
-        encoder, content_type = choose_encoder(self.headers.get("Accept", ""))
-        body = encoder(self.server.registry)
+        accept = self.headers.get("Accept", "")
+        if "application/openmetrics-text" in accept:
+            encoder, content_type = choose_encoder(accept)
+            body = encoder(self.server.registry)
+        else:
+            body, content_type = self.server.exposition.render(), EXPOSITION_CONTENT_TYPE
         self._send(200, body, content_type, head_only, compressible=True)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:

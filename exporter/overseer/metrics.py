@@ -19,7 +19,7 @@ from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamil
 from prometheus_client.registry import Collector
 
 from overseer import __version__
-from overseer.model import FleetModel
+from overseer.model import FleetModel, FleetSnapshot, RobotState
 
 MESSAGE_RESULTS = ("received", "decode_error", "dropped")
 DROP_REASONS = ("robot_limit", "component_limit", "value_limit", "invalid_level")
@@ -61,41 +61,82 @@ class FleetCollector(Collector):
         """Fresh families from one snapshot of the fleet."""
         snapshot = self._model.snapshot()
         families = _Families.create()
-        level, robot_level, robot_up = families.level, families.robot_level, families.robot_up
-        last_message, changes, value = families.last_message, families.changes, families.value
-        messages, dropped, truncated = families.messages, families.dropped, families.truncated
-        key_allowed = self._value_keys.fullmatch
-        parsed: dict[str, float | None] = {}
+        numbers = NumericValues(self._value_keys)
         for robot in snapshot.robots:
             name = robot.name
-            up = snapshot.robot_up(robot)
-            robot_up.add_metric([name], 1.0 if up else 0.0)
-            robot_level.add_metric([name], float(snapshot.robot_level(robot)))
+            families.robot_up.add_metric([name], 1.0 if snapshot.robot_up(robot) else 0.0)
+            families.robot_level.add_metric([name], float(snapshot.robot_level(robot)))
             if robot.last_message is not None:
-                last_message.add_metric([name], robot.last_message)
-            for key, component in robot.components.items():
-                labels = [name, component.name, component.hardware_id]
-                level.add_metric(labels, float(snapshot.component_level(robot, key, component, up)))
-                changes.add_metric(labels, float(component.level_changes))
-                for value_key, text in component.values:
-                    if not key_allowed(value_key):
-                        continue
-                    if text not in parsed:
-                        parsed[text] = numeric_value(text)
-                    number = parsed[text]
-                    if number is not None:
-                        value.add_metric([*labels, value_key], number)
-        counts = dict(snapshot.message_counts)
-        for transport in self._transports:
-            for result in MESSAGE_RESULTS:
-                counts.setdefault((transport, result), 0)
-        for (transport, result), count in sorted(counts.items()):
-            messages.add_metric([transport, result], float(count))
+                families.last_message.add_metric([name], robot.last_message)
+            samples = robot_samples(snapshot, robot, numbers)
+            for labels, sample in samples.levels:
+                families.level.add_metric(list(labels), sample)
+            for labels, sample in samples.changes:
+                families.changes.add_metric(list(labels), sample)
+            for value_labels, sample in samples.values:
+                families.value.add_metric(list(value_labels), sample)
+        for (transport, result), count in message_counts(snapshot, self._transports):
+            families.messages.add_metric([transport, result], float(count))
         for reason in DROP_REASONS:
-            dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
-        truncated.add_metric([], float(snapshot.truncated_strings))
+            families.dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
+        families.truncated.add_metric([], float(snapshot.truncated_strings))
         families.build.add_metric([__version__], 1.0)
         yield from families.all()
+
+
+class NumericValues:
+    """Which key-values are exported, and their numbers; caches the parse of each distinct text."""
+
+    def __init__(self, value_keys: re.Pattern[str]) -> None:
+        """Export keys that fully match `value_keys`."""
+        self._allowed = value_keys.fullmatch
+        self._parsed: dict[str, float | None] = {}
+
+    def pairs(self, values: tuple[tuple[str, str], ...]) -> Iterator[tuple[str, float]]:
+        """(key, number) for each allowed key with a numeric value, the first of any repeated key."""
+        seen: set[str] = set()
+        for key, text in values:
+            if key in seen or not self._allowed(key):
+                continue
+            seen.add(key)
+            if text in self._parsed:
+                number = self._parsed[text]
+            else:
+                number = self._parsed[text] = numeric_value(text)
+            if number is not None:
+                yield key, number
+
+
+@dataclass(frozen=True, slots=True)
+class RobotSamples:
+    """One robot's per-component samples: (labels, value) in the contract's label order."""
+
+    levels: list[tuple[tuple[str, str, str], float]]
+    changes: list[tuple[tuple[str, str, str], float]]
+    values: list[tuple[tuple[str, str, str, str], float]]
+
+
+def robot_samples(snapshot: FleetSnapshot, robot: RobotState, numbers: NumericValues) -> RobotSamples:
+    """The per-component samples of one robot at the snapshot's time."""
+    up = snapshot.robot_up(robot)
+    name = robot.name
+    samples = RobotSamples([], [], [])
+    for key, component in robot.components.items():
+        labels = (name, component.name, component.hardware_id)
+        samples.levels.append((labels, float(snapshot.component_level(robot, key, component, up))))
+        samples.changes.append((labels, float(component.level_changes)))
+        for value_key, number in numbers.pairs(component.values):
+            samples.values.append(((*labels, value_key), number))
+    return samples
+
+
+def message_counts(snapshot: FleetSnapshot, transports: Iterable[str]) -> list[tuple[tuple[str, str], int]]:
+    """Message counts by (transport, result), with zeros for every result of the active transports."""
+    counts = dict(snapshot.message_counts)
+    for transport in transports:
+        for result in MESSAGE_RESULTS:
+            counts.setdefault((transport, result), 0)
+    return sorted(counts.items())
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,169 @@
+"""Prometheus text exposition (format 0.0.4) of the fleet, fast enough for 100,000 series per scrape.
+
+It renders exactly the bytes prometheus-client renders from `FleetCollector` (the tests hold the two
+equal), but keeps each robot's lines and rebuilds them only when the robot's state or the set of its
+stale components changed: between two scrapes most robots merely republished the same diagnostics.
+"""
+
+from __future__ import annotations
+
+import bisect
+import re
+import threading
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import cast
+
+from prometheus_client.utils import floatToGoString
+
+from overseer import __version__
+from overseer.levels import Level, worst
+from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts, robot_samples
+from overseer.model import FleetModel, FleetSnapshot, RobotState
+
+CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+
+# prometheus-client's number format (Go's), so values render exactly as the collector's do.
+go_float = cast(Callable[[float], str], floatToGoString)
+
+
+def escape_label_value(value: str) -> str:
+    """A label value as the text format writes it between double quotes."""
+    return value.replace("\\", r"\\").replace("\n", r"\n").replace('"', r"\"")
+
+
+@dataclass(frozen=True, slots=True)
+class _RobotLines:
+    """One robot's rendered per-component lines and what they were rendered for."""
+
+    signature: tuple[int, bool, bool, int]
+    revision: int
+    other_updates: list[float]  # sorted last updates of components missing from the latest message
+    robot_level: Level
+    levels: bytes
+    changes: bytes
+    values: bytes
+
+
+class FleetExposition:
+    """Renders the fleet model as the metric contract in the Prometheus text format."""
+
+    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
+        """Render `model`, exporting key-values whose key fully matches `value_keys`."""
+        self._model = model
+        self._value_keys = value_keys
+        self._transports = tuple(transports)
+        self._headers = {
+            metric.name: _header(metric.name, metric.type, metric.documentation)
+            for metric in _Families.create().all()
+        }
+        self._robots: dict[str, _RobotLines] = {}
+        self._lock = threading.Lock()
+
+    def render(self) -> bytes:
+        """The exposition of the fleet now."""
+        with self._lock:
+            return self._render(self._model.snapshot())
+
+    def _render(self, snapshot: FleetSnapshot) -> bytes:
+        numbers = NumericValues(self._value_keys)
+        previous, current = self._robots, {}
+        levels, changes, values = [], [], []
+        robot_level, robot_up, last_message = [], [], []
+        for robot in snapshot.robots:
+            label = f'{{robot="{escape_label_value(robot.name)}"}} '
+            up = snapshot.robot_up(robot)
+            lines = _lines_for(snapshot, robot, up, previous.get(robot.name), numbers)
+            current[robot.name] = lines
+            levels.append(lines.levels)
+            changes.append(lines.changes)
+            values.append(lines.values)
+            robot_level.append(f"ros_diagnostics_robot_level{label}{go_float(float(lines.robot_level))}\n")
+            robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
+            if robot.last_message is not None:
+                last_message.append(
+                    f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
+                    f"{go_float(robot.last_message)}\n"
+                )
+        self._robots = current
+        headers = self._headers
+        tail = [headers["overseer_messages"]]
+        for (transport, result), count in message_counts(snapshot, self._transports):
+            tail.append(
+                f'overseer_messages_total{{result="{escape_label_value(result)}",'
+                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
+            )
+        tail.append(headers["overseer_statuses_dropped"])
+        for reason in DROP_REASONS:
+            dropped = float(snapshot.dropped_statuses.get(reason, 0))
+            tail.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {go_float(dropped)}\n')
+        tail.append(headers["overseer_strings_truncated"])
+        tail.append(f"overseer_strings_truncated_total {go_float(float(snapshot.truncated_strings))}\n")
+        tail.append(headers["overseer_build_info"])
+        tail.append(f'overseer_build_info{{version="{escape_label_value(__version__)}"}} 1.0\n')
+        return b"".join(
+            [
+                headers["ros_diagnostics_level"].encode(),
+                *levels,
+                (headers["ros_diagnostics_robot_level"] + "".join(robot_level)).encode(),
+                (headers["ros_diagnostics_robot_up"] + "".join(robot_up)).encode(),
+                (
+                    headers["ros_diagnostics_robot_last_message_timestamp_seconds"] + "".join(last_message)
+                ).encode(),
+                headers["ros_diagnostics_level_changes"].encode(),
+                *changes,
+                headers["ros_diagnostics_value"].encode(),
+                *values,
+                "".join(tail).encode(),
+            ]
+        )
+
+
+def _lines_for(
+    snapshot: FleetSnapshot, robot: RobotState, up: bool, cached: _RobotLines | None, numbers: NumericValues
+) -> _RobotLines:
+    if cached is not None and cached.revision == robot.revision:
+        other_updates = cached.other_updates
+    else:
+        other_updates = sorted(
+            component.last_update
+            for key, component in robot.components.items()
+            if key not in robot.message_keys
+        )
+    horizon = snapshot.taken_at - snapshot.limits.stale_after
+    message_stale = robot.last_message is None or robot.last_message < horizon
+    signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))
+    if cached is not None and cached.signature == signature:
+        return cached
+    samples = robot_samples(snapshot, robot, numbers)
+    robot_level = worst(Level(int(value)) for _, value in samples.levels) if up else Level.STALE
+    return _RobotLines(
+        signature,
+        robot.revision,
+        other_updates,
+        robot_level,
+        _sample_lines("ros_diagnostics_level", ("component", "hardware_id", "robot"), samples.levels),
+        _sample_lines(
+            "ros_diagnostics_level_changes_total", ("component", "hardware_id", "robot"), samples.changes
+        ),
+        _sample_lines("ros_diagnostics_value", ("component", "hardware_id", "key", "robot"), samples.values),
+    )
+
+
+def _sample_lines(
+    name: str, label_names: tuple[str, ...], samples: Iterable[tuple[tuple[str, ...], float]]
+) -> bytes:
+    # prometheus-client writes label names sorted; ours are (robot, component, hardware_id[, key]).
+    lines = []
+    for labels, value in samples:
+        robot, rest = labels[0], labels[1:]
+        ordered = (*rest, robot)
+        pairs = ",".join(f'{n}="{escape_label_value(v)}"' for n, v in zip(label_names, ordered, strict=True))
+        lines.append(f"{name}{{{pairs}}} {go_float(value)}\n")
+    return "".join(lines).encode()
+
+
+def _header(name: str, kind: str, documentation: str) -> str:
+    exposed = name + "_total" if kind == "counter" else name
+    help_text = documentation.replace("\\", r"\\").replace("\n", r"\n")
+    return f"# HELP {exposed} {help_text}\n# TYPE {exposed} {kind}\n"
