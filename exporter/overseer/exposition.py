@@ -18,8 +18,8 @@ from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
 from overseer.levels import Level, worst
-from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts, robot_samples
-from overseer.model import FleetModel, FleetSnapshot, RobotState
+from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts
+from overseer.model import Component, ComponentKey, FleetModel, FleetSnapshot, RobotState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 
@@ -33,6 +33,16 @@ def escape_label_value(value: str) -> str:
 
 
 @dataclass(frozen=True, slots=True)
+class _ComponentLines:
+    """A component's rendered labels and level-independent lines, valid while its record is unchanged."""
+
+    component: Component
+    labels: str
+    changes: str
+    values: str
+
+
+@dataclass(frozen=True, slots=True)
 class _RobotLines:
     """One robot's rendered per-component lines and what they were rendered for."""
 
@@ -40,6 +50,7 @@ class _RobotLines:
     revision: int
     other_updates: list[float]  # sorted last updates of components missing from the latest message
     robot_level: Level
+    components: dict[ComponentKey, _ComponentLines]
     levels: bytes
     changes: bytes
     values: bytes
@@ -135,32 +146,46 @@ def _lines_for(
     signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))
     if cached is not None and cached.signature == signature:
         return cached
-    samples = robot_samples(snapshot, robot, numbers)
-    robot_level = worst(Level(int(value)) for _, value in samples.levels) if up else Level.STALE
+    previous = cached.components if cached is not None else {}
+    robot_label = f'robot="{escape_label_value(robot.name)}"'
+    parts: dict[ComponentKey, _ComponentLines] = {}
+    levels: list[str] = []
+    found: list[Level] = []
+    for key, component in robot.components.items():
+        part = previous.get(key)
+        if part is None or part.component is not component:
+            part = _component_lines(component, robot_label, numbers)
+        parts[key] = part
+        level = snapshot.component_level(robot, key, component, up)
+        found.append(level)
+        levels.append(f"ros_diagnostics_level{part.labels} {_LEVEL_VALUES[level]}\n")
     return _RobotLines(
         signature,
         robot.revision,
         other_updates,
-        robot_level,
-        _sample_lines("ros_diagnostics_level", ("component", "hardware_id", "robot"), samples.levels),
-        _sample_lines(
-            "ros_diagnostics_level_changes_total", ("component", "hardware_id", "robot"), samples.changes
-        ),
-        _sample_lines("ros_diagnostics_value", ("component", "hardware_id", "key", "robot"), samples.values),
+        worst(found) if up else Level.STALE,
+        parts,
+        "".join(levels).encode(),
+        "".join(part.changes for part in parts.values()).encode(),
+        "".join(part.values for part in parts.values()).encode(),
     )
 
 
-def _sample_lines(
-    name: str, label_names: tuple[str, ...], samples: Iterable[tuple[tuple[str, ...], float]]
-) -> bytes:
-    # prometheus-client writes label names sorted; ours are (robot, component, hardware_id[, key]).
-    lines = []
-    for labels, value in samples:
-        robot, rest = labels[0], labels[1:]
-        ordered = (*rest, robot)
-        pairs = ",".join(f'{n}="{escape_label_value(v)}"' for n, v in zip(label_names, ordered, strict=True))
-        lines.append(f"{name}{{{pairs}}} {go_float(value)}\n")
-    return "".join(lines).encode()
+_LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
+
+
+def _component_lines(component: Component, robot_label: str, numbers: NumericValues) -> _ComponentLines:
+    # prometheus-client writes label names sorted: component, hardware_id, [key,] robot.
+    name, hardware_id = escape_label_value(component.name), escape_label_value(component.hardware_id)
+    identity = f'component="{name}",hardware_id="{hardware_id}"'
+    labels = f"{{{identity},{robot_label}}}"
+    values = "".join(
+        f'ros_diagnostics_value{{{identity},key="{escape_label_value(key)}",{robot_label}}} '
+        f"{go_float(number)}\n"
+        for key, number in numbers.pairs(component.values)
+    )
+    changes = f"ros_diagnostics_level_changes_total{labels} {go_float(float(component.level_changes))}\n"
+    return _ComponentLines(component, labels, changes, values)
 
 
 def _header(name: str, kind: str, documentation: str) -> str:
