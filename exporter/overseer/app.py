@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from prometheus_client.registry import CollectorRegistry
 
@@ -35,11 +35,12 @@ class Exporter:
         if self.config.dds.enabled:
             from overseer.sources.dds import DdsSource
 
-            self.sources.append(DdsSource(self.config.dds, self.model))
+            self.sources.append(DdsSource(self.config.dds, self.model, self.config.shard))
         if self.config.ros1.enabled:
             from overseer.sources.ros1 import Ros1Source
 
-            self.sources.append(Ros1Source(self.config.ros1, self.model))
+            robots = tuple(robot for robot in self.config.ros1.robots if self.config.shard.owns(robot.name))
+            self.sources.append(Ros1Source(replace(self.config.ros1, robots=robots), self.model))
         registry = CollectorRegistry(auto_describe=True)
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern

@@ -104,6 +104,11 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         metavar="NAME=MASTER_URI",
         help="a ROS 1 robot by its master, e.g. robot1=http://10.0.0.5:11311; repeat for several",
     )
+    parser.add_argument(
+        "--shard",
+        metavar="I/N",
+        help="follow only the robots whose name hashes to shard I of N (default 0/1)",
+    )
     parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
@@ -158,6 +163,8 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, name)
         if value is not None:
             overrides[f"fleet.{name}"] = parse_duration(value, f"--fleet.{name.replace('_', '-')}")
+    if args.shard is not None:
+        overrides["shard"] = args.shard
     if args.log_level is not None:
         overrides["log_level"] = args.log_level
     return overrides

@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 
 from overseer.model import FleetLimits
+from overseer.shard import Shard
 
 DEFAULT_PORT = 9849
 DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")
@@ -106,6 +107,7 @@ class Config:
     ros1: Ros1Config = field(default_factory=Ros1Config)
     fleet: FleetLimits = field(default_factory=FleetLimits)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    shard: Shard = field(default_factory=Shard)
     log_level: str = "info"
 
 
@@ -137,6 +139,14 @@ def parse_listen_address(value: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
+def parse_shard(value: object, key: str = "shard") -> Shard:
+    """A `Shard` from `i/n` with 0 <= i < n."""
+    match = re.fullmatch(r"(\d+)/(\d+)", value) if isinstance(value, str) else None
+    if match is None or not 0 <= int(match.group(1)) < int(match.group(2)):
+        raise ConfigError(f"{key}: expected i/n with 0 <= i < n, such as 0/2, got {value!r}")
+    return Shard(int(match.group(1)), int(match.group(2)))
+
+
 def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
     """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags."""
     raw: dict[str, Any] = {}
@@ -163,7 +173,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
-    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "log_level"})
+    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level"})
     web = _section(raw, "web", {"listen_address"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
@@ -182,6 +192,8 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         fleet=_fleet_limits(fleet),
         metrics=_metrics_config(metrics),
     )
+    if "shard" in raw:
+        config = replace(config, shard=parse_shard(raw["shard"]))
     if "log_level" in raw:
         level = _string(raw["log_level"], "log_level").lower()
         if level not in _LOG_LEVELS:

@@ -25,6 +25,7 @@ from overseer.codec import DecodeError
 from overseer.codec.cdr import decode_diagnostic_array
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
+from overseer.shard import Shard
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
@@ -60,10 +61,11 @@ class DdsSource:
 
     transport = TRANSPORT
 
-    def __init__(self, config: DdsConfig, model: FleetModel) -> None:
-        """Prepare to feed `model` from the domains in `config`; nothing joins until `start`."""
+    def __init__(self, config: DdsConfig, model: FleetModel, shard: Shard | None = None) -> None:
+        """Feed `model` from the domains in `config`, following only `shard`'s robots; joins on `start`."""
         self._config = config
         self._model = model
+        self._shard = shard or Shard()
         self._sessions: list[_DomainSession] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -124,6 +126,8 @@ class DdsSource:
         if parsed is None or topic_name in session.readers or parsed.kind not in self._config.topics:
             return
         robot = parsed.namespace or session.config.unnamespaced_robot
+        if not self._shard.owns(robot):
+            return
         sibling = topic_name[: -len(parsed.kind)] + (RAW if parsed.kind == AGGREGATED else AGGREGATED)
         if self._config.prefer_aggregated and AGGREGATED in self._config.topics:
             if parsed.kind == RAW and sibling in session.readers:
