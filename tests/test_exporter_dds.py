@@ -230,3 +230,25 @@ def test_live_exposition_passes_promtool(tmp_path: Path, dds_domain: int) -> Non
     result = subprocess.run(["promtool", "check", "metrics"], input=text, capture_output=True, timeout=60)
     assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
     assert text.count(b"ros_diagnostics_level{") == 30
+
+
+def test_varying_values_reach_the_exporter(tmp_path: Path, dds_domain: int) -> None:
+    voltage = (
+        ("component", "/Power/Robot Battery"),
+        ("hardware_id", "power1"),
+        ("key", "voltage"),
+        ("robot", "robot1"),
+    )
+    with (
+        running_exporter(tmp_path, dds_domain) as exporter,
+        running_simulator(tmp_path, dds_domain, "--robots=1", "--rate=5", "--vary-values"),
+    ):
+        first = wait_for(
+            lambda: scrape(exporter)["ros_diagnostics_value"].get(voltage), 30, message="voltage"
+        )
+        second = wait_for(
+            lambda: (v := scrape(exporter)["ros_diagnostics_value"][voltage]) != first and v,
+            30,
+            message="new voltage",
+        )
+    assert 12.0 <= first < 13.0 and 12.0 <= second < 13.0

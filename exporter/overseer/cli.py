@@ -130,6 +130,9 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--namespace-prefix", default="robot", help="robot names are PREFIX1..PREFIXN")
     parser.add_argument("--topic", choices=["diagnostics_agg", "diagnostics"], default="diagnostics_agg")
     parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true")
+    parser.add_argument(
+        "--vary-values", action="store_true", help="change each robot's battery voltage at every publication"
+    )
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     parser.add_argument(
         "--event",
@@ -232,6 +235,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         namespace_prefix=args.namespace_prefix,
         topic=args.topic,
         loopback_only=args.loopback_only,
+        vary_values=args.vary_values,
         events=events,
     )
 

@@ -22,7 +22,7 @@ from cyclonedds.topic import Topic
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.fleet_design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
-from overseer.messages import DiagnosticArray
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds import ROS_DEFAULT_QOS
 from overseer.sources.dds_types import DiagnosticArray as DdsDiagnosticArray
@@ -33,6 +33,14 @@ log = logging.getLogger(__name__)
 _STAMP = struct.Struct("<iI")
 ROBOT_ACTIONS = ("stop", "start")
 COMPONENT_ACTIONS = ("silence", "resume")
+
+
+VARYING_PLACEHOLDER = "VVVVVVVV"
+
+
+def _with_varying_voltage(status: DiagnosticStatus) -> DiagnosticStatus:
+    values = tuple((k, VARYING_PLACEHOLDER if k == "voltage" else v) for k, v in status.values)
+    return status._replace(values=values)
 
 
 class EventError(ValueError):
@@ -77,7 +85,8 @@ class SimulatedRobot:
     levels: dict[str, Level]
     silenced: set[str] = field(default_factory=set)
     running: bool = True
-    payload_tail: bytes | None = None  # the encoded array after its stamp, rebuilt when state changes
+    payload_tail: bytearray | None = None  # the encoded array after its stamp, rebuilt when state changes
+    varying_at: int = -1  # offset in payload_tail of a fixed-width value rewritten at every publication
 
 
 @dataclass
@@ -94,6 +103,7 @@ class SimulatorSettings:
     namespace_prefix: str = "robot"
     topic: str = AGGREGATED
     loopback_only: bool = False
+    vary_values: bool = False
     events: list[Event] = field(default_factory=list)
 
 
@@ -166,9 +176,13 @@ class FleetSimulator:
             if writer is None:
                 continue
             if robot.payload_tail is None:
-                payload = self.encode(robot)
-                robot.payload_tail = payload[12:]
-            result = ddspy_write(writer._ref, b"\x00\x01\x00\x00" + stamp + robot.payload_tail)
+                robot.payload_tail = bytearray(self.encode(robot)[12:])
+                robot.varying_at = robot.payload_tail.find(VARYING_PLACEHOLDER.encode())
+            if robot.varying_at >= 0:
+                # A voltage that changes at every publication, as real ones do, without re-encoding.
+                reading = f"{12.0 + (now * 7.3 % 1.0):0{len(VARYING_PLACEHOLDER)}.5f}"
+                robot.payload_tail[robot.varying_at : robot.varying_at + len(reading)] = reading.encode()
+            result = ddspy_write(writer._ref, b"\x00\x01\x00\x00" + stamp + bytes(robot.payload_tail))
             if result < 0:
                 log.warning("writing %s failed with DDS error %d", robot.name, result)
             else:
@@ -178,6 +192,8 @@ class FleetSimulator:
     def encode(self, robot: SimulatedRobot) -> bytes:
         """The robot's current DiagnosticArray as little-endian CDR, padded to whole words."""
         statuses = aggregated_statuses(self.leaves, robot.levels, robot.silenced)
+        if self.settings.vary_values:
+            statuses = [_with_varying_voltage(status) for status in statuses]
         payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", tuple(statuses)))
         return payload + b"\x00" * (-len(payload) & 3)
 

@@ -3,15 +3,31 @@
 //
 // Usage: publisher --domain D --topic rt/<ns>/diagnostics_agg --rate HZ [--count N]
 //                  --status 'LEVEL|NAME|MESSAGE|HARDWARE_ID|k1=v1;k2=v2' [--status ...]
+//        publisher --domain D --topic rt/<ns>/diagnostics_agg --rate HZ [--count N]
+//                  --raw-hex HEX [--raw-hex HEX ...]
+//
+// With --status, publishes one DiagnosticArray_ holding those statuses every period.
+// With --raw-hex (exclusive with --status), publishes the given bytes verbatim as the
+// serialized payload, cycling through them one per period. HEX includes the 4-byte
+// encapsulation header (e.g. "00010000..." for CDR little-endian); whitespace is
+// ignored. Nothing is validated, so truncated or malformed payloads go out as given,
+// under the same type name "diagnostic_msgs::msg::dds_::DiagnosticArray_". Note that
+// Fast DDS pads the DATA submessage to a multiple of 4 bytes with zeros, so a
+// reader may see up to 3 extra zero bytes after a payload whose length is not a
+// multiple of 4.
 //
 // Prints "ready" once the writer exists and "matched N" whenever the number of
-// matched readers changes. Runs until N samples are sent, or SIGINT/SIGTERM.
+// matched readers changes. Runs until N samples are sent (0 = forever, the
+// default), or SIGINT/SIGTERM.
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cctype>
 #include <cstdint>
+#include <cstring>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <mutex>
@@ -27,7 +43,10 @@
 #include <fastdds/dds/publisher/DataWriterListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
+#include <fastdds/dds/topic/TopicDataType.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
+#include <fastdds/rtps/common/InstanceHandle.h>
+#include <fastdds/rtps/common/SerializedPayload.h>
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 #include <fastrtps/utils/IPLocator.h>
 
@@ -36,7 +55,9 @@
 using namespace eprosima::fastdds::dds;
 using eprosima::fastdds::rtps::UDPv4TransportDescriptor;
 using eprosima::fastrtps::rtps::IPLocator;
+using eprosima::fastrtps::rtps::InstanceHandle_t;
 using eprosima::fastrtps::rtps::Locator_t;
+using eprosima::fastrtps::rtps::SerializedPayload_t;
 namespace diag = diagnostic_msgs::msg::dds_;
 
 namespace {
@@ -121,12 +142,91 @@ diag::DiagnosticStatus_ parse_status(const std::string& spec)
     return status;
 }
 
+using RawPayload = std::vector<uint8_t>;
+
+// Hex digits (whitespace ignored) to bytes.
+RawPayload parse_hex(const std::string& text)
+{
+    std::string digits;
+    for (char c : text) {
+        if (std::isspace(static_cast<unsigned char>(c))) {
+            continue;
+        }
+        if (!std::isxdigit(static_cast<unsigned char>(c))) {
+            throw std::invalid_argument("bad --raw-hex (not a hex digit '" + std::string(1, c) + "'): " + text);
+        }
+        digits.push_back(c);
+    }
+    if (digits.empty() || digits.size() % 2 != 0) {
+        throw std::invalid_argument("bad --raw-hex (want a non-empty, even number of hex digits): " + text);
+    }
+    RawPayload bytes;
+    bytes.reserve(digits.size() / 2);
+    for (std::size_t i = 0; i < digits.size(); i += 2) {
+        bytes.push_back(static_cast<uint8_t>(std::stoul(digits.substr(i, 2), nullptr, 16)));
+    }
+    return bytes;
+}
+
+// Type support that sends a RawPayload (std::vector<uint8_t>) verbatim as the serialized
+// payload, under the DiagnosticArray_ type name so it matches the same readers.
+// In Fast DDS 2.9 serialize() writes the 4-byte encapsulation header into payload->data
+// itself (see the generated diagnosticsPubSubTypes.cxx), so the raw bytes carry their own
+// header; payload->encapsulation is set from it for consistency. Unkeyed, like the real type.
+class RawPayloadType : public TopicDataType {
+public:
+    explicit RawPayloadType(uint32_t max_size)
+    {
+        setName("diagnostic_msgs::msg::dds_::DiagnosticArray_");
+        m_typeSize = max_size;
+        m_isGetKeyDefined = false;
+        auto_fill_type_object(false);
+        auto_fill_type_information(false);
+    }
+
+    bool serialize(void* data, SerializedPayload_t* payload) override
+    {
+        const RawPayload& bytes = *static_cast<const RawPayload*>(data);
+        if (bytes.size() > payload->max_size) {
+            return false;
+        }
+        if (!bytes.empty()) {
+            std::memcpy(payload->data, bytes.data(), bytes.size());
+        }
+        payload->length = static_cast<uint32_t>(bytes.size());
+        payload->encapsulation = bytes.size() >= 2
+            ? static_cast<uint16_t>((static_cast<uint16_t>(bytes[0]) << 8) | bytes[1])
+            : static_cast<uint16_t>(CDR_BE);
+        return true;
+    }
+
+    bool deserialize(SerializedPayload_t* payload, void* data) override
+    {
+        RawPayload& bytes = *static_cast<RawPayload*>(data);
+        bytes.assign(payload->data, payload->data + payload->length);
+        return true;
+    }
+
+    std::function<uint32_t()> getSerializedSizeProvider(void* data) override
+    {
+        const auto size = static_cast<uint32_t>(static_cast<const RawPayload*>(data)->size());
+        return [size]() -> uint32_t { return size; };
+    }
+
+    void* createData() override { return new RawPayload(); }
+
+    void deleteData(void* data) override { delete static_cast<RawPayload*>(data); }
+
+    bool getKey(void*, InstanceHandle_t*, bool) override { return false; }
+};
+
 struct Options {
     DomainId_t domain = 0;
     std::string topic;
     double rate = 1.0;
     long count = 0;  // 0 = forever
     std::vector<diag::DiagnosticStatus_> statuses;
+    std::vector<RawPayload> raw_payloads;
 };
 
 Options parse_args(int argc, char** argv)
@@ -148,12 +248,17 @@ Options parse_args(int argc, char** argv)
             opt.count = parse_number<long>(arg, value);
         } else if (arg == "--status") {
             opt.statuses.push_back(parse_status(value));
+        } else if (arg == "--raw-hex") {
+            opt.raw_payloads.push_back(parse_hex(value));
         } else {
             throw std::invalid_argument("unknown argument: " + arg);
         }
     }
     if (opt.topic.empty() || opt.rate <= 0 || opt.count < 0) {
         throw std::invalid_argument("--topic and a positive --rate are required");
+    }
+    if (!opt.statuses.empty() && !opt.raw_payloads.empty()) {
+        throw std::invalid_argument("--status and --raw-hex are mutually exclusive");
     }
     return opt;
 }
@@ -194,7 +299,8 @@ int main(int argc, char** argv)
         opt = parse_args(argc, argv);
     } catch (const std::exception& e) {
         std::cerr << "publisher: " << e.what() << "\nusage: publisher --domain D --topic T --rate HZ "
-                  << "[--count N] --status 'LEVEL|NAME|MESSAGE|HARDWARE_ID|k=v;...' [--status ...]\n";
+                  << "[--count N] --status 'LEVEL|NAME|MESSAGE|HARDWARE_ID|k=v;...' [--status ...]\n"
+                  << "       publisher --domain D --topic T --rate HZ [--count N] --raw-hex HEX [--raw-hex ...]\n";
         return 2;
     }
     std::signal(SIGINT, on_signal);
@@ -206,7 +312,17 @@ int main(int argc, char** argv)
         std::cerr << "publisher: cannot create participant\n";
         return 1;
     }
-    TypeSupport type(new diag::DiagnosticArray_PubSubType());
+    const bool raw = !opt.raw_payloads.empty();
+    TypeSupport type;
+    if (raw) {
+        std::size_t max_size = 0;
+        for (const RawPayload& bytes : opt.raw_payloads) {
+            max_size = std::max(max_size, bytes.size());
+        }
+        type = TypeSupport(new RawPayloadType(static_cast<uint32_t>(max_size)));
+    } else {
+        type = TypeSupport(new diag::DiagnosticArray_PubSubType());
+    }
     type.register_type(participant);
     Topic* topic = participant->create_topic(opt.topic, type.get_type_name(), TOPIC_QOS_DEFAULT);
     Publisher* publisher = participant->create_publisher(PUBLISHER_QOS_DEFAULT);
@@ -232,11 +348,19 @@ int main(int argc, char** argv)
         std::chrono::duration<double>(1.0 / opt.rate));
     auto next = std::chrono::steady_clock::now();
     for (long sent = 0; (opt.count == 0 || sent < opt.count) && sleep_until(next); ++sent) {
-        auto since_epoch = std::chrono::system_clock::now().time_since_epoch();
-        auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(since_epoch).count();
-        msg.header().stamp().sec(static_cast<int32_t>(ns / 1000000000));
-        msg.header().stamp().nanosec(static_cast<uint32_t>(ns % 1000000000));
-        writer->write(&msg);
+        bool ok = false;
+        if (raw) {
+            ok = writer->write(&opt.raw_payloads[static_cast<std::size_t>(sent) % opt.raw_payloads.size()]);
+        } else {
+            auto since_epoch = std::chrono::system_clock::now().time_since_epoch();
+            auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(since_epoch).count();
+            msg.header().stamp().sec(static_cast<int32_t>(ns / 1000000000));
+            msg.header().stamp().nanosec(static_cast<uint32_t>(ns % 1000000000));
+            ok = writer->write(&msg);
+        }
+        if (!ok) {
+            std::cerr << "publisher: write " << sent << " failed\n";
+        }
         next += period;
     }
 
