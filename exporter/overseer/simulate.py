@@ -35,6 +35,7 @@ ROBOT_ACTIONS = ("stop", "start")
 COMPONENT_ACTIONS = ("silence", "resume")
 
 
+VARYING_COMPONENT = "/Power/Robot Battery"  # leaf 0: every simulated robot has it
 VARYING_PLACEHOLDER = "VVVVVVVV"
 
 
@@ -193,7 +194,10 @@ class FleetSimulator:
         """The robot's current DiagnosticArray as little-endian CDR, padded to whole words."""
         statuses = aggregated_statuses(self.leaves, robot.levels, robot.silenced)
         if self.settings.vary_values:
-            statuses = [_with_varying_voltage(status) for status in statuses]
+            statuses = [
+                _with_varying_voltage(status) if status.name == VARYING_COMPONENT else status
+                for status in statuses
+            ]
         payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", tuple(statuses)))
         return payload + b"\x00" * (-len(payload) & 3)
 
