@@ -21,13 +21,13 @@ from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from overseer.codec import DecodeError
 from overseer.codec.cdr import decode_diagnostic_array
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
 from overseer.shard import Shard
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
+from overseer.sources.ingest import PayloadIngest
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
 log = logging.getLogger(__name__)
@@ -36,6 +36,7 @@ TRANSPORT = "dds"
 DISCOVERY_INTERVAL_SECONDS = 0.2
 _TAKE_BATCH = 64
 _ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
+CDR_STAMP = (4, 12)  # the header stamp, after the 4-byte encapsulation header
 
 # ROS 2's default QoS profile for topics. Readers stay volatile so they match both volatile
 # and transient-local writers.
@@ -146,8 +147,7 @@ class DdsSource:
         log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
 
     def _on_data_callback(self, robot: str, topic_name: str) -> Any:
-        model = self._model
-        previous: list[bytes] = [b""]  # the last payload applied, to skip decoding an unchanged one
+        ingest = PayloadIngest(self._model, robot, TRANSPORT, topic_name, decode_diagnostic_array, CDR_STAMP)
 
         def on_data_available(reader: DataReader[DiagnosticArray]) -> None:
             try:
@@ -157,26 +157,11 @@ class DdsSource:
                         log.warning("take on %s failed with DDS error %d", topic_name, samples)
                         return
                     for data, info in samples:
-                        if not info.valid_data:
-                            continue
-                        if same_content(data, previous[0]) and model.touch(robot, TRANSPORT):
-                            continue
-                        try:
-                            array = decode_diagnostic_array(data)
-                        except DecodeError as error:
-                            model.count_message(TRANSPORT, "decode_error")
-                            log.debug("undecodable sample on %s: %s", topic_name, error)
-                            continue
-                        model.apply(robot, array, TRANSPORT, topic_name)
-                        previous[0] = data
+                        if info.valid_data:
+                            ingest(data)
                     if len(samples) < _TAKE_BATCH:
                         return
             except Exception:  # a callback from the DDS thread must never raise
                 log.exception("failed to process diagnostics from %s", topic_name)
 
         return on_data_available
-
-
-def same_content(payload: bytes, previous: bytes) -> bool:
-    """True when two serialized arrays differ at most in their header stamp (bytes 4 to 12)."""
-    return len(payload) == len(previous) and payload[:4] == previous[:4] and payload[12:] == previous[12:]

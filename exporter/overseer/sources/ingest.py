@@ -1,0 +1,58 @@
+"""From one topic's raw payloads to the fleet model: decode, apply, and skip what did not change."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+from overseer.codec import DecodeError
+from overseer.messages import DiagnosticArray
+from overseer.model import FleetModel
+
+log = logging.getLogger(__name__)
+
+
+class PayloadIngest:
+    """Feeds one robot's diagnostics topic into the model.
+
+    Aggregators republish the same array every second. A payload equal to the last one applied, but
+    for the bytes at `ignored` (the header's sequence number and stamp), only refreshes the robot.
+    """
+
+    def __init__(
+        self,
+        model: FleetModel,
+        robot: str,
+        transport: str,
+        topic: str,
+        decode: Callable[[bytes], DiagnosticArray],
+        ignored: tuple[int, int],
+    ) -> None:
+        """Ingest `topic` of `robot` with `decode`; bytes `ignored[0]:ignored[1]` may differ in repeats."""
+        self._model = model
+        self._robot = robot
+        self._transport = transport
+        self._topic = topic
+        self._decode = decode
+        self._start, self._end = ignored
+        self._previous = b""
+
+    def __call__(self, payload: bytes) -> bool:
+        """Apply one payload; False when it could not be decoded (counted as decode_error)."""
+        previous = self._previous
+        if (
+            len(payload) == len(previous)
+            and payload[self._end :] == previous[self._end :]
+            and payload[: self._start] == previous[: self._start]
+            and self._model.touch(self._robot, self._transport)
+        ):
+            return True
+        try:
+            array = self._decode(payload)
+        except DecodeError as error:
+            self._model.count_message(self._transport, "decode_error")
+            log.debug("undecodable payload on %s: %s", self._topic, error)
+            return False
+        self._model.apply(self._robot, array, self._transport, self._topic)
+        self._previous = payload
+        return True
