@@ -19,7 +19,7 @@ from prometheus_client.utils import floatToGoString
 from overseer import __version__
 from overseer.levels import Level, worst
 from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts
-from overseer.model import Component, ComponentKey, FleetModel, FleetSnapshot, RobotState
+from overseer.model import FleetModel, FleetSnapshot, RobotState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 
@@ -33,16 +33,6 @@ def escape_label_value(value: str) -> str:
 
 
 @dataclass(frozen=True, slots=True)
-class _ComponentLines:
-    """A component's rendered labels and level-independent lines, valid while its record is unchanged."""
-
-    component: Component
-    labels: str
-    changes: str
-    values: str
-
-
-@dataclass(frozen=True, slots=True)
 class _RobotLines:
     """One robot's rendered per-component lines and what they were rendered for."""
 
@@ -50,7 +40,6 @@ class _RobotLines:
     revision: int
     other_updates: list[float]  # sorted last updates of components missing from the latest message
     robot_level: Level
-    components: dict[ComponentKey, _ComponentLines]
     levels: bytes
     changes: bytes
     values: bytes
@@ -77,14 +66,14 @@ class FleetExposition:
             return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
-        numbers = NumericValues(self._value_keys)
+        render = _RenderCache(NumericValues(self._value_keys))
         previous, current = self._robots, {}
         levels, changes, values = [], [], []
         robot_level, robot_up, last_message = [], [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
-            lines = _lines_for(snapshot, robot, up, previous.get(robot.name), numbers)
+            lines = _lines_for(snapshot, robot, up, previous.get(robot.name), render)
             current[robot.name] = lines
             levels.append(lines.levels)
             changes.append(lines.changes)
@@ -131,7 +120,7 @@ class FleetExposition:
 
 
 def _lines_for(
-    snapshot: FleetSnapshot, robot: RobotState, up: bool, cached: _RobotLines | None, numbers: NumericValues
+    snapshot: FleetSnapshot, robot: RobotState, up: bool, cached: _RobotLines | None, render: _RenderCache
 ) -> _RobotLines:
     if cached is not None and cached.revision == robot.revision:
         other_updates = cached.other_updates
@@ -146,46 +135,59 @@ def _lines_for(
     signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))
     if cached is not None and cached.signature == signature:
         return cached
-    previous = cached.components if cached is not None else {}
-    robot_label = f'robot="{escape_label_value(robot.name)}"'
-    parts: dict[ComponentKey, _ComponentLines] = {}
+    # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
+    # per-render caches make rebuilding cheap, since a fleet repeats its names, keys and values.
+    escape, number, pairs = render.escape, render.number, render.numbers.pairs
+    robot_label = f'robot="{escape(robot.name)}"'
     levels: list[str] = []
+    changes: list[str] = []
+    values: list[str] = []
     found: list[Level] = []
     for key, component in robot.components.items():
-        part = previous.get(key)
-        if part is None or part.component is not component:
-            part = _component_lines(component, robot_label, numbers)
-        parts[key] = part
+        identity = f'component="{escape(component.name)}",hardware_id="{escape(component.hardware_id)}"'
+        labels = f"{{{identity},{robot_label}}} "
         level = snapshot.component_level(robot, key, component, up)
         found.append(level)
-        levels.append(f"ros_diagnostics_level{part.labels} {_LEVEL_VALUES[level]}\n")
+        levels.append(f"ros_diagnostics_level{labels}{_LEVEL_VALUES[level]}\n")
+        changes.append(
+            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n"
+        )
+        for value_key, value in pairs(component.values):
+            key_label = f'key="{escape(value_key)}"'
+            values.append(f"ros_diagnostics_value{{{identity},{key_label},{robot_label}}} {number(value)}\n")
     return _RobotLines(
         signature,
         robot.revision,
         other_updates,
         worst(found) if up else Level.STALE,
-        parts,
         "".join(levels).encode(),
-        "".join(part.changes for part in parts.values()).encode(),
-        "".join(part.values for part in parts.values()).encode(),
+        "".join(changes).encode(),
+        "".join(values).encode(),
     )
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
 
 
-def _component_lines(component: Component, robot_label: str, numbers: NumericValues) -> _ComponentLines:
-    # prometheus-client writes label names sorted: component, hardware_id, [key,] robot.
-    name, hardware_id = escape_label_value(component.name), escape_label_value(component.hardware_id)
-    identity = f'component="{name}",hardware_id="{hardware_id}"'
-    labels = f"{{{identity},{robot_label}}}"
-    values = "".join(
-        f'ros_diagnostics_value{{{identity},key="{escape_label_value(key)}",{robot_label}}} '
-        f"{go_float(number)}\n"
-        for key, number in numbers.pairs(component.values)
-    )
-    changes = f"ros_diagnostics_level_changes_total{labels} {go_float(float(component.level_changes))}\n"
-    return _ComponentLines(component, labels, changes, values)
+class _RenderCache:
+    """Memoized escaping and number formatting for one render."""
+
+    def __init__(self, numbers: NumericValues) -> None:
+        self.numbers = numbers
+        self._escaped: dict[str, str] = {}
+        self._formatted: dict[float, str] = {}
+
+    def escape(self, text: str) -> str:
+        escaped = self._escaped.get(text)
+        if escaped is None:
+            escaped = self._escaped[text] = escape_label_value(text)
+        return escaped
+
+    def number(self, value: float) -> str:
+        formatted = self._formatted.get(value)
+        if formatted is None:
+            formatted = self._formatted[value] = go_float(value)
+        return formatted
 
 
 def _header(name: str, kind: str, documentation: str) -> str:

@@ -8,6 +8,7 @@ the snapshot's time, never stored, so they cannot drift from the clock.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from collections import Counter
@@ -214,7 +215,7 @@ class FleetModel:
                     if len(components) >= limits.max_components_per_robot:
                         dropped["component_limit"] += 1
                         continue
-                    components[key] = Component(key[0], key[1], level, message, values, now, 0, topic)
+                    components[key] = _component(key, level, message, values, now, 0, topic)
                 elif (
                     previous.level is not level
                     or previous.message != message
@@ -222,7 +223,7 @@ class FleetModel:
                     or previous.topic != topic
                 ):
                     changes = previous.level_changes + (previous.level is not level)
-                    components[key] = Component(key[0], key[1], level, message, values, now, changes, topic)
+                    components[key] = _component(key, level, message, values, now, changes, topic)
                 message_keys.add(key)
             if state is not None and state.last_message is not None:
                 # Components missing from this message keep the time of the last message that had them.
@@ -280,6 +281,29 @@ class FleetModel:
             dropped = dict(self._dropped_statuses)
             truncated = self._truncated_strings
         return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated)
+
+
+def _component(
+    key: ComponentKey,
+    level: Level,
+    message: str,
+    values: tuple[tuple[str, str], ...],
+    now: float,
+    changes: int,
+    topic: str,
+) -> Component:
+    # Robots of one fleet repeat the same names, messages and keys: interning stores each text once.
+    intern = sys.intern
+    return Component(
+        intern(key[0]),
+        intern(key[1]),
+        level,
+        intern(message),
+        tuple((intern(k), v) for k, v in values),
+        now,
+        changes,
+        topic,
+    )
 
 
 def _replace_components(state: RobotState, components: dict[ComponentKey, Component]) -> RobotState:

@@ -1,0 +1,88 @@
+"""What every benchmark shares: result rows, their table, and process CPU and memory readings."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass
+from typing import TextIO
+
+ROW_PREFIX = "BENCH-ROW "
+_TICKS = os.sysconf("SC_CLK_TCK")
+_PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+@dataclass(frozen=True)
+class Row:
+    """One measured figure, with the target it is held to (empty when it has none)."""
+
+    benchmark: str
+    figure: str
+    value: float
+    unit: str
+    target: str = ""
+    met: bool | None = None
+
+
+def emit(rows: Iterable[Row]) -> None:
+    """Print rows for `python -m bench` to collect, and as a table for a person running one benchmark."""
+    rows = list(rows)
+    for row in rows:
+        print(ROW_PREFIX + json.dumps(asdict(row)), flush=True)
+    print_table(rows, file=sys.stderr)
+
+
+def print_table(rows: Iterable[Row], file: TextIO | None = None) -> None:
+    """A fixed-width table of rows."""
+    out = file or sys.stdout
+    header = ("benchmark", "figure", "value", "unit", "target", "met")
+    lines = [header] + [
+        (
+            r.benchmark,
+            r.figure,
+            _number(r.value),
+            r.unit,
+            r.target,
+            {True: "yes", False: "NO", None: ""}[r.met],
+        )
+        for r in rows
+    ]
+    widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
+    for index, line in enumerate(lines):
+        print(
+            "  ".join(cell.ljust(width) for cell, width in zip(line, widths, strict=True)).rstrip(), file=out
+        )
+        if index == 0:
+            print("  ".join("-" * width for width in widths), file=out)
+
+
+def _number(value: float) -> str:
+    if value == int(value) and abs(value) < 1e15:
+        return f"{int(value):,}"
+    return f"{value:,.3g}" if abs(value) < 10 else f"{value:,.1f}"
+
+
+def cpu_seconds(pid: int) -> float:
+    """User plus system CPU time a process has used."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / _TICKS
+
+
+def resident_bytes(pid: int | None = None) -> int:
+    """Resident memory of a process (this one by default)."""
+    with open(f"/proc/{pid or 'self'}/statm", encoding="ascii") as statm:
+        return int(statm.read().split()[1]) * _PAGE
+
+
+def best_rate(work: Callable[[], int], repeats: int = 5) -> float:
+    """Items per second of the fastest of `repeats` runs of `work` (which returns its item count)."""
+    best = 0.0
+    for _ in range(repeats):
+        started = time.perf_counter()
+        items = work()
+        best = max(best, items / (time.perf_counter() - started))
+    return best
