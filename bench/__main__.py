@@ -37,7 +37,11 @@ def main() -> int:
             failed.append(module)
             print(result.stdout[-3000:], result.stderr[-3000:], file=sys.stderr)
     cpu = next(
-        (line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
+        (
+            line.split(":", 1)[1].strip()
+            for line in Path("/proc/cpuinfo").read_text().splitlines()
+            if line.startswith("model name")
+        ),
         "?",
     )
     print(
