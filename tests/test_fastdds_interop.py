@@ -6,6 +6,8 @@ name is wrong, which Cyclone-to-Cyclone tests cannot catch.
 
 from __future__ import annotations
 
+import re
+import subprocess
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -14,6 +16,8 @@ from typing import Any
 import pytest
 
 from fastdds_build import build_fastdds_publisher
+from overseer.codec.cdr import encode_diagnostic_array
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support.processes import RunningProcess, running_exporter, spawn, wait_for
 
 BUILD_DIR = Path(__file__).resolve().parents[1] / ".cache" / "fastdds-build"
@@ -95,3 +99,56 @@ def test_fastdds_robot_without_namespace_is_named_by_config(
     ):
         robot = wait_for(lambda: (r := exporter.robot("forklift")) and r["up"] and r, 60, message="forklift")
     assert robot["counts"] == {"ok": 1, "warn": 1, "error": 1, "stale": 1}
+
+
+GARBLED = [
+    "000100000102030405",  # truncated inside the header
+    "000100000100000002000000ffffff7f6f6b0000",  # frame_id length runs past the payload
+    "0001000000000000000000000100000000000000ffffff7f01000000",  # status count runs past the payload
+    "000100000100000002000000020000006f6b000000000000",  # string without its terminating NUL
+]
+
+
+def test_garbled_payloads_are_counted_and_valid_ones_still_apply(
+    fastdds_publisher: Path, tmp_path: Path, dds_domain: int
+) -> None:
+    valid = encode_diagnostic_array(
+        DiagnosticArray(1, 0, "", (DiagnosticStatus(1, "/Power/Battery", "Low", "bms", ()),))
+    )
+    args = [
+        str(fastdds_publisher),
+        "--domain",
+        str(dds_domain),
+        "--topic",
+        "rt/garbled/diagnostics_agg",
+        "--rate",
+        "8",
+    ]
+    for garbled in GARBLED:
+        args += ["--raw-hex", valid.hex(), "--raw-hex", garbled]
+    log = tmp_path / "fastdds-raw.log"
+    with running_exporter(tmp_path, dds_domain) as exporter:
+        publisher = RunningProcess(spawn(args, log), log)
+        try:
+            robot = wait_for(
+                lambda: (r := exporter.robot("garbled")) and r["up"] and r, 60, message="garbled robot"
+            )
+            assert [(c["name"], c["state"]) for c in robot["components"]] == [("/Power/Battery", "WARN")]
+            wait_for(
+                lambda: decode_errors(exporter.get("/metrics").decode()) >= len(GARBLED),
+                60,
+                message="counted drops",
+            )
+        finally:
+            publisher.stop()
+        exposition = exporter.get("/metrics")
+        assert exporter.get("/-/healthy") == b"OK\n"
+    result = subprocess.run(
+        ["promtool", "check", "metrics"], input=exposition, capture_output=True, timeout=60
+    )
+    assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def decode_errors(exposition: str) -> float:
+    match = re.search(r'overseer_messages_total\{result="decode_error",transport="dds"\} (\S+)', exposition)
+    return float(match.group(1)) if match else 0.0

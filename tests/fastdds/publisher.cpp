@@ -14,7 +14,10 @@
 // under the same type name "diagnostic_msgs::msg::dds_::DiagnosticArray_". Note that
 // Fast DDS pads the DATA submessage to a multiple of 4 bytes with zeros, so a
 // reader may see up to 3 extra zero bytes after a payload whose length is not a
-// multiple of 4.
+// multiple of 4 (and a payload shorter than 4 bytes arrives as 4). Cyclone DDS drops
+// an undecodable payload silently; one with an unknown encapsulation identifier
+// (e.g. 00ff) makes it discard the whole RTPS message, which stalls the reliable
+// stream until the sample leaves this writer's history (KEEP_LAST 10).
 //
 // Prints "ready" once the writer exists and "matched N" whenever the number of
 // matched readers changes. Runs until N samples are sent (0 = forever, the

@@ -9,6 +9,7 @@ deserializer and turns a malformed payload into a counted `decode_error` instead
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +27,7 @@ from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
 from overseer.shard import Shard
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
+from overseer.sources.cyclone_log import CycloneWarnings
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.ingest import PayloadIngest
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
@@ -73,10 +75,13 @@ class DdsSource:
 
     def start(self) -> None:
         """Join every configured domain and start discovering robots."""
-        xml = loopback_only_config() if self._config.loopback_only else self._config.cyclonedds_uri
+        warnings = CycloneWarnings(self._count_dropped_sample)
+        base = loopback_only_config() if self._config.loopback_only else self._config.cyclonedds_uri
+        # An explicit configuration replaces CYCLONEDDS_URI, so the operator's one is kept in front.
+        fragments = [base or os.environ.get("CYCLONEDDS_URI", ""), warnings.config()]
+        config = ",".join(fragment for fragment in fragments if fragment)
         for domain_config in self._config.domains:
-            if xml:
-                configure_domain(domain_config.id, xml)
+            configure_domain(domain_config.id, config)
             participant = DomainParticipant(domain_config.id)
             publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
             self._sessions.append(
@@ -92,6 +97,10 @@ class DdsSource:
         if self._thread is not None:
             self._thread.join(timeout=5)
         self._sessions.clear()
+
+    def _count_dropped_sample(self, warning: str) -> None:
+        self._model.count_message(TRANSPORT, "decode_error")
+        log.warning("malformed sample dropped: %s", warning)
 
     @property
     def subscribed_topics(self) -> list[tuple[int, str]]:
