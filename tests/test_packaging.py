@@ -69,4 +69,4 @@ def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_dock
     assert "overseer/web/index.html" in names
     assert "overseer/py.typed" in names
     assert re.search(r"^overseer = overseer\.cli:main$", entry_points, re.M)
-    assert re.search(r"^check_ros_diagnostics = overseer\.check:main$", entry_points, re.M)
+    assert "overseer-0.1.0.data/scripts/check_ros_diagnostics" in names

@@ -1,0 +1,320 @@
+"""check_ros_diagnostics: a Monitoring Plugins check of one robot, read from the exporter's JSON API.
+
+It starts once per check, so it imports only cheap standard modules (no argparse or getopt, not even
+__future__; a socket rather than urllib: see check_http.py) and none of the exporter; bench/bench_check.py
+measures it.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from overseer import __version__, check_json
+from overseer.check_http import Answer, get, parse_url, quote_path
+from overseer.check_report import (
+    CRITICAL,
+    UNKNOWN,
+    WARNING,
+    CheckError,
+    Settings,
+    clean,
+    judge,
+    robot_from_document,
+)
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (14 ms)
+if TYPE_CHECKING:
+    import re
+
+PROGRAM = "check_ros_diagnostics"
+
+USAGE = f"""Usage:
+ {PROGRAM} [-H <exporter host>] [-p <port>] | [--url <exporter URL>]  -r <robot>
+   [-n <text>] [--name-regex <regex>] [--stale-state unknown|warning|critical] [--perfdata-values]
+   [-a <user:password>] [--ca-file <file>] [--insecure] [-t <seconds>] [-v] [-V] [-h]"""
+
+HELP = f"""{PROGRAM} {__version__} (Overseer)
+Checks one ROS robot's diagnostics as the Overseer exporter sees them (its JSON API, so the same
+data Prometheus scrapes): the worst component state, per-level counts as perfdata, and the list of
+components per state.
+
+{USAGE}
+
+Options:
+ -h, --help
+    Print this help and exit (with 3, UNKNOWN, as the Monitoring Plugins do)
+ -V, --version
+    Print the version and exit (with 3, UNKNOWN)
+ -H, --hostname=ADDRESS
+    Host name or IP address of the Overseer exporter, not of the robot (default: 127.0.0.1)
+ -p, --port=INTEGER
+    Port of the exporter (default: 9849)
+ --url=URL
+    Base URL of the exporter instead of -H/-p, e.g. https://overseer.example:9849 or a proxy path
+ -r, --robot=NAME
+    The robot as the exporter names it (its ROS namespace, e.g. robot1 or site_a/robot7)
+ -n, --name=TEXT
+    Judge only components whose name contains TEXT, ignoring case (e.g. battery); empty: all
+ --name-regex=REGEX
+    Judge only components whose name matches the Python regular expression REGEX (with -n: both)
+ --stale-state=STATE
+    State for stale components and for a robot that is down: unknown (default), warning, critical
+ --perfdata-values
+    Add the numeric key-values of the judged components to the perfdata ('<component>:<key>')
+ -a, --authorization=USER:PASSWORD
+    Basic authentication, for an exporter behind an authenticating proxy
+ --ca-file=FILE
+    CA certificates to verify an https exporter with (default: the system's)
+ --insecure
+    Do not verify the https exporter's certificate
+ -t, --timeout=SECONDS
+    Give up after SECONDS, with UNKNOWN (default: 10)
+ -v, --verbose
+    Once: add each component's key-values to the lists; twice: also the URL that was read
+
+States: a component in ERROR is CRITICAL, in WARN is WARNING, in OK is OK; a stale one (and a robot
+that is down) is UNKNOWN unless --stale-state says otherwise. The check's state is the worst one by
+CRITICAL > WARNING > UNKNOWN > OK. Unreachable exporter, timeout, HTTP or authentication errors,
+malformed answers, unknown robots and a filter that matches nothing are UNKNOWN, each with its reason.
+
+Example:
+ {PROGRAM} -H 127.0.0.1 -r robot1 -n battery
+ WARNING - robot1: /Power/Robot Battery (Low charge) | 'error'=0;;;0 'warn'=1;;;0 'stale'=0;;;0 'ok'=1;;;0"""
+
+# Long option → whether it takes a value; the short options are aliases.
+LONG_OPTIONS = {
+    "--help": False,
+    "--version": False,
+    "--hostname": True,
+    "--port": True,
+    "--url": True,
+    "--robot": True,
+    "--name": True,
+    "--name-regex": True,
+    "--stale-state": True,
+    "--perfdata-values": False,
+    "--authorization": True,
+    "--ca-file": True,
+    "--insecure": False,
+    "--timeout": True,
+    "--verbose": False,
+}
+_SHORT_OPTIONS = {
+    "-h": "--help",
+    "-V": "--version",
+    "-H": "--hostname",
+    "-p": "--port",
+    "-r": "--robot",
+    "-n": "--name",
+    "-a": "--authorization",
+    "-t": "--timeout",
+    "-v": "--verbose",
+}
+_STALE_STATES = {"unknown": UNKNOWN, "warning": WARNING, "critical": CRITICAL}
+
+
+class Options:
+    """What the command line asks for."""
+
+    __slots__ = ("authorization", "ca_file", "insecure", "robot", "settings", "timeout", "url")
+
+    def __init__(
+        self,
+        url: str,
+        robot: str,
+        settings: Settings,
+        timeout: float,
+        authorization: str,
+        ca_file: str,
+        insecure: bool,
+    ) -> None:
+        """Keep the fields; `url` is the exporter's base URL without a trailing '/'."""
+        self.url = url
+        self.robot = robot
+        self.settings = settings
+        self.timeout = timeout
+        self.authorization = authorization
+        self.ca_file = ca_file
+        self.insecure = insecure
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the check on `argv` (default: the command line), print its output, return the exit code."""
+    try:
+        state, text = outcome(sys.argv[1:] if argv is None else argv)
+    except CheckError as error:
+        state, text = UNKNOWN, f"UNKNOWN - {clean(str(error))}"
+    except Exception as error:  # a plugin never dies with a traceback: Nagios would show only its last line
+        state, text = UNKNOWN, f"UNKNOWN - internal error: {type(error).__name__}: {clean(str(error))}"
+    sys.stdout.buffer.write(text.encode("utf-8", "replace") + b"\n")
+    sys.stdout.flush()
+    return state
+
+
+def outcome(argv: list[str]) -> tuple[int, str]:
+    """The exit state and output for `argv`: help, version, or the check's result."""
+    flags, verbosity = parse_flags(argv)
+    if "--help" in flags:
+        return UNKNOWN, HELP
+    if "--version" in flags:
+        return UNKNOWN, f"{PROGRAM} {__version__} (Overseer)"
+    return check(options_from_flags(flags, verbosity))
+
+
+def parse_flags(argv: list[str]) -> tuple[dict[str, str], int]:
+    """The options given, by long name (the last one wins), and how many times -v was given.
+
+    GNU getopt_long style (`--name=value`, `--name value`, `-n value`, `-nvalue`, `-vv`), written out
+    because the getopt module imports gettext, which costs more than this.
+    """
+    flags: dict[str, str] = {}
+    verbosity = 0
+    pending = argv[::-1]
+    while pending:
+        for name, value in split_argument(pending.pop(), pending):
+            flags[name] = value
+            if name == "--verbose":
+                verbosity += 1
+    return flags, verbosity
+
+
+def split_argument(argument: str, pending: list[str]) -> list[tuple[str, str]]:
+    """The (long option, value) pairs in one argument; a value given separately is popped off `pending`."""
+    if argument.startswith("--"):
+        name, equals, value = argument.partition("=")
+        if name not in LONG_OPTIONS:
+            raise CheckError(f"option {name} not recognized (see --help)")
+        if equals and not LONG_OPTIONS[name]:
+            raise CheckError(f"option {name} takes no value (see --help)")
+        return [(name, value if equals or not LONG_OPTIONS[name] else next_value(name, pending))]
+    if len(argument) < 2 or not argument.startswith("-"):
+        raise CheckError(f"unexpected argument {argument!r} (see --help)")
+    pairs: list[tuple[str, str]] = []
+    for index, letter in enumerate(argument[1:], start=2):
+        name = _SHORT_OPTIONS.get(f"-{letter}", "")
+        if not name:
+            raise CheckError(f"option -{letter} not recognized (see --help)")
+        if LONG_OPTIONS[name]:
+            return [*pairs, (name, argument[index:] or next_value(f"-{letter}", pending))]
+        pairs.append((name, ""))
+    return pairs
+
+
+def next_value(option: str, pending: list[str]) -> str:
+    """The separate value of `option`, popped off `pending`."""
+    if not pending:
+        raise CheckError(f"option {option} requires a value (see --help)")
+    return pending.pop()
+
+
+def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
+    """Validated options; CheckError naming the first bad one."""
+    robot = flags.get("--robot", "")
+    if not robot:
+        raise CheckError("no robot given: use -r/--robot (see --help)")
+    settings = Settings(
+        name=flags.get("--name", ""),
+        name_regex=compile_regex(flags.get("--name-regex", "")),
+        stale_state=stale_state(flags.get("--stale-state", "unknown")),
+        perfdata_values="--perfdata-values" in flags,
+        verbosity=verbosity,
+    )
+    return Options(
+        url=exporter_url(flags),
+        robot=robot,
+        settings=settings,
+        timeout=seconds(flags.get("--timeout", "10")),
+        authorization=flags.get("--authorization", ""),
+        ca_file=flags.get("--ca-file", ""),
+        insecure="--insecure" in flags,
+    )
+
+
+def exporter_url(flags: dict[str, str]) -> str:
+    """The exporter's base URL, from --url or from -H and -p."""
+    url = flags.get("--url", "")
+    if url:
+        if "--hostname" in flags or "--port" in flags:
+            raise CheckError("give either --url or -H/-p, not both")
+        parse_url(url)
+        return url.rstrip("/")
+    host = flags.get("--hostname", "") or "127.0.0.1"
+    port = flags.get("--port", "") or "9849"
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise CheckError(f"invalid port {port!r}: give a number from 1 to 65535")
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"
+    return f"http://{host}:{port}"
+
+
+def compile_regex(pattern: str) -> re.Pattern[str] | None:
+    """The compiled --name-regex, None when not given; CheckError when it is not a valid expression."""
+    if not pattern:
+        return None
+    import re  # only a --name-regex pays for it
+
+    try:
+        return re.compile(pattern)
+    except re.error as error:
+        raise CheckError(f"invalid --name-regex {pattern!r}: {error}") from None
+
+
+def stale_state(name: str) -> int:
+    """The Nagios state --stale-state names."""
+    try:
+        return _STALE_STATES[name.lower()]
+    except KeyError:
+        raise CheckError(f"invalid --stale-state {name!r}: use unknown, warning or critical") from None
+
+
+def seconds(text: str) -> float:
+    """The --timeout in seconds; CheckError unless it is a positive number."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not 0 < value < 86400:
+        raise CheckError(f"invalid --timeout {text!r}: give seconds, more than 0 and less than a day")
+    return value
+
+
+def check(options: Options) -> tuple[int, str]:
+    """Read the robot from the exporter and judge it."""
+    url = f"{options.url}/api/v1/robots/{quote_path(options.robot)}"
+    answer = get(url, options.timeout, options.authorization, options.ca_file, options.insecure)
+    check_status(answer, url, options)
+    try:
+        document = check_json.loads(answer.body)
+    except ValueError as error:
+        raise CheckError(f"malformed JSON from {url}: {error}") from None
+    try:
+        robot = robot_from_document(document)
+    except CheckError as error:
+        raise CheckError(f"unexpected answer from {url}: {error}") from None
+    state, text = judge(robot, options.settings)
+    if options.settings.verbosity > 1:
+        text += f"\nRead {url} (HTTP {answer.status}, {len(answer.body)} bytes)"
+    return state, text
+
+
+def check_status(answer: Answer, url: str, options: Options) -> None:
+    """CheckError unless the answer is a 200; an exporter's 404 means it does not know the robot."""
+    if answer.status == 200:
+        return
+    if answer.status in (401, 403):
+        raise CheckError(f"authentication refused by {url}: HTTP {answer.status} {answer.reason}")
+    if answer.status == 404 and is_exporter_error(answer.body):
+        raise CheckError(
+            f"{clean(options.robot)} is unknown to the exporter at {options.url}"
+            " (never discovered, or forgotten after expire_after)"
+        )
+    raise CheckError(f"HTTP {answer.status} {answer.reason} from {url}")
+
+
+def is_exporter_error(body: bytes) -> bool:
+    """Whether `body` is the exporter's JSON error document ({"error": ...})."""
+    try:
+        document = check_json.loads(body)
+    except ValueError:
+        return False
+    return isinstance(document, dict) and "error" in document

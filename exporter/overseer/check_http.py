@@ -1,0 +1,203 @@
+"""The check's HTTP client: one GET over a plain socket, with TLS and basic auth when asked.
+
+`urllib.request` and `http.client` import the email package and ssl, which alone take longer than
+starting Python; the exporter's API needs one GET and a body, so HTTP/1.0 over a socket does it (an
+HTTP/1.0 request gets neither chunked encoding nor keep-alive). Even `socket.py` costs a sixth of
+Python's start-up in enums and selectors, so plain http uses the `_socket` C module it wraps;
+`socket`, `ssl` and `binascii` are imported only when https or credentials need them.
+"""
+
+import _socket
+import time
+
+from overseer import __version__
+from overseer.check_report import CheckError
+
+_MAX_ANSWER_BYTES = 64 * 1024 * 1024
+_UNRESERVED = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-._~/")
+
+
+class Answer:
+    """An HTTP answer: status code, reason phrase and body."""
+
+    __slots__ = ("body", "reason", "status")
+
+    def __init__(self, status: int, reason: str, body: bytes) -> None:
+        """Keep the fields."""
+        self.status = status
+        self.reason = reason
+        self.body = body
+
+
+class Url:
+    """An http(s) URL split into what a request needs."""
+
+    __slots__ = ("host", "path", "port", "tls")
+
+    def __init__(self, tls: bool, host: str, port: int, path: str) -> None:
+        """Keep the fields; `host` is bare (no IPv6 brackets), `path` starts with '/'."""
+        self.tls = tls
+        self.host = host
+        self.port = port
+        self.path = path
+
+    def authority(self) -> str:
+        """`host:port` as the Host header and messages write it (IPv6 in brackets)."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{host}:{self.port}"
+
+
+def parse_url(url: str) -> Url:
+    """Split `scheme://host[:port][/path]`; CheckError when it is not an http(s) URL without credentials."""
+    scheme, separator, rest = url.partition("://")
+    scheme = scheme.lower()
+    if not separator or scheme not in ("http", "https"):
+        raise CheckError(f"invalid URL {url!r}: it must start with http:// or https://")
+    authority, slash, path = rest.partition("/")
+    if "@" in authority:
+        raise CheckError("invalid URL: give credentials with -a/--authorization, not in the URL")
+    host, port_text = split_host_port(authority, "443" if scheme == "https" else "80")
+    if not host:
+        raise CheckError(f"invalid URL {url!r}: no host")
+    if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise CheckError(f"invalid URL {url!r}: bad port {port_text!r}")
+    return Url(scheme == "https", host, int(port_text), slash + path or "/")
+
+
+def split_host_port(authority: str, default_port: str) -> tuple[str, str]:
+    """`host[:port]` or `[v6]:port` → (bare host, port text)."""
+    if authority.startswith("["):
+        host, _, after = authority[1:].partition("]")
+        return host, after.removeprefix(":") or default_port
+    host, _, port = authority.partition(":")
+    return host, port or default_port
+
+
+def quote_path(text: str) -> str:
+    """`text` percent-encoded for a URL path, keeping '/' (robot names may contain it)."""
+    return "".join(chr(byte) if byte in _UNRESERVED else f"%{byte:02X}" for byte in text.encode("utf-8"))
+
+
+def get(
+    url: str, timeout: float, authorization: str = "", ca_file: str = "", insecure: bool = False
+) -> Answer:
+    """GET `url` within `timeout` seconds in all; CheckError naming the URL when no HTTP answer comes back.
+
+    The deadline bounds connecting, sending and every read; only a DNS lookup that hangs can outlast it.
+    """
+    target = parse_url(url)
+    deadline = time.monotonic() + timeout
+    try:
+        stream = connect(target, deadline, ca_file, insecure)
+        try:
+            stream.sendall(request_bytes(target, authorization))
+            return parse_answer(read_all(stream, deadline), url)
+        finally:
+            stream.close()
+    except _socket.gaierror as error:
+        raise CheckError(f"cannot resolve {target.host!r}: {error.strerror}") from None
+    except TimeoutError:
+        raise CheckError(f"timeout: no complete answer from {url} within {timeout:g} s") from None
+    except ConnectionRefusedError:
+        raise CheckError(f"exporter unreachable at {url}: connection refused") from None
+    except OSError as error:
+        raise CheckError(f"exporter unreachable at {url}: {error.strerror or error}") from None
+
+
+def remaining(deadline: float) -> float:
+    """Seconds left until `deadline`; TimeoutError when none are."""
+    left = deadline - time.monotonic()
+    if left <= 0:
+        raise TimeoutError
+    return left
+
+
+def connect(target: Url, deadline: float, ca_file: str, insecure: bool) -> _socket.socket:
+    """A connection to the first of `target`'s addresses that accepts one, inside TLS for https."""
+    # An ASCII host goes to getaddrinfo as bytes, which spares importing the IDNA codec.
+    host = target.host.encode("ascii") if target.host.isascii() else target.host
+    error = OSError(f"no address for {target.host}")
+    for family, kind, protocol, _, address in _socket.getaddrinfo(host, target.port, 0, _socket.SOCK_STREAM):
+        sock = _socket.socket(family, kind, protocol)
+        try:
+            sock.settimeout(remaining(deadline))
+            sock.connect(address)
+        except OSError as refused:
+            sock.close()
+            error = refused
+            continue
+        return wrap_tls(sock, target.host, deadline, ca_file, insecure) if target.tls else sock
+    raise error
+
+
+def wrap_tls(
+    sock: _socket.socket, host: str, deadline: float, ca_file: str, insecure: bool
+) -> _socket.socket:
+    """`sock` inside TLS after a handshake before `deadline`, verifying the certificate unless `insecure`."""
+    import socket  # only https pays for these
+    import ssl
+
+    context = ssl.create_default_context(cafile=ca_file or None)
+    if insecure:
+        context.check_hostname = False
+        context.verify_mode = ssl.CERT_NONE
+    plain = socket.socket(fileno=sock.detach())
+    plain.settimeout(remaining(deadline))
+    return context.wrap_socket(plain, server_hostname=host)
+
+
+def request_bytes(target: Url, credentials: str) -> bytes:
+    """The HTTP/1.0 GET request for `target`, with basic auth when `credentials` is `user:password`."""
+    lines = [
+        f"GET {target.path} HTTP/1.0",
+        f"Host: {target.authority()}",
+        "Accept: application/json",
+        f"User-Agent: check_ros_diagnostics/{__version__}",
+    ]
+    if credentials:
+        import binascii  # only basic auth pays for it
+
+        token = binascii.b2a_base64(credentials.encode("utf-8"), newline=False).decode("ascii")
+        lines.append(f"Authorization: Basic {token}")
+    return ("\r\n".join(lines) + "\r\n\r\n").encode("utf-8")
+
+
+def read_all(stream: _socket.socket, deadline: float) -> bytes:
+    """Everything the server sends until it closes the connection, before `deadline`, up to a sane limit."""
+    chunks = []
+    size = 0
+    while True:
+        stream.settimeout(remaining(deadline))
+        chunk = stream.recv(65536)
+        if not chunk:
+            break
+        size += len(chunk)
+        if size > _MAX_ANSWER_BYTES:
+            raise CheckError(f"answer larger than {_MAX_ANSWER_BYTES // (1024 * 1024)} MiB")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def parse_answer(raw: bytes, url: str) -> Answer:
+    """Status line, headers and body of a raw HTTP answer; CheckError when it is not one."""
+    head, separator, body = raw.partition(b"\r\n\r\n")
+    lines = head.decode("iso-8859-1").split("\r\n")
+    version, _, status = lines[0].partition(" ")
+    code, _, reason = status.partition(" ")
+    if not separator or not version.startswith("HTTP/") or not code.isdigit():
+        raise CheckError(f"no HTTP answer from {url}")
+    length = header(lines[1:], "content-length")
+    if length.isdigit():
+        if len(body) < int(length):
+            raise CheckError(f"answer from {url} cut short: {len(body)} of {length} bytes")
+        body = body[: int(length)]
+    return Answer(int(code), reason.strip(), body)
+
+
+def header(lines: list[str], name: str) -> str:
+    """The value of header `name` (lower case) among `lines`, or ''."""
+    for line in lines:
+        key, _, value = line.partition(":")
+        if key.strip().lower() == name:
+            return value.strip()
+    return ""

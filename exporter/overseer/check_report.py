@@ -1,0 +1,340 @@
+"""Judge a robot's components the Nagios way and write the plugin output; pure functions, no I/O.
+
+Only the standard library's cheapest modules are used here: `check_ros_diagnostics` starts once
+per check, and its start-up time is most of its run time.
+"""
+
+from __future__ import annotations
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (14 ms)
+if TYPE_CHECKING:
+    import re
+
+
+OK, WARNING, CRITICAL, UNKNOWN = 0, 1, 2, 3
+STATE_NAMES = ("OK", "WARNING", "CRITICAL", "UNKNOWN")
+STALE_LEVEL = 3
+
+# Rank by Nagios state: CRITICAL > WARNING > UNKNOWN > OK. A numeric max would rank UNKNOWN worst.
+_SEVERITY_RANK = (0, 2, 3, 1)
+_COUNT_LABELS = (("error", 2), ("warn", 1), ("stale", 3), ("ok", 0))
+_SUMMARY_COMPONENTS = 3
+_SUMMARY_MESSAGE_CHARS = 60
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"  # compiled on first use, by re's cache
+
+
+class CheckError(Exception):
+    """A failure that ends the check in UNKNOWN; its text is the status line's."""
+
+
+class Component:
+    """One diagnostic component as the exporter's JSON API reports it."""
+
+    __slots__ = ("hardware_id", "level", "message", "name", "values")
+
+    def __init__(
+        self, name: str, hardware_id: str, level: int, message: str, values: list[tuple[str, str]]
+    ) -> None:
+        """Keep the fields; `level` is the effective one (3 when stale)."""
+        self.name = name
+        self.hardware_id = hardware_id
+        self.level = level
+        self.message = message
+        self.values = values
+
+
+class Robot:
+    """One robot as the exporter's JSON API reports it."""
+
+    __slots__ = ("components", "generated_at", "last_message", "name", "up")
+
+    def __init__(
+        self,
+        name: str,
+        up: bool,
+        last_message: float | None,
+        generated_at: float,
+        components: list[Component],
+    ) -> None:
+        """Keep the fields; times are the exporter's unix times."""
+        self.name = name
+        self.up = up
+        self.last_message = last_message
+        self.generated_at = generated_at
+        self.components = components
+
+
+class Settings:
+    """How to judge and what to print, from the command line."""
+
+    __slots__ = ("name", "name_regex", "perfdata_values", "stale_state", "verbosity")
+
+    def __init__(
+        self,
+        name: str = "",
+        name_regex: re.Pattern[str] | None = None,
+        stale_state: int = UNKNOWN,
+        perfdata_values: bool = False,
+        verbosity: int = 0,
+    ) -> None:
+        """Keep the fields; an empty `name` keeps every component."""
+        self.name = name
+        self.name_regex = name_regex
+        self.stale_state = stale_state
+        self.perfdata_values = perfdata_values
+        self.verbosity = verbosity
+
+
+def robot_from_document(document: object) -> Robot:
+    """The robot in a `GET /api/v1/robots/<robot>` answer; CheckError naming what is wrong with it."""
+    if not isinstance(document, dict):
+        raise CheckError("the answer is not a JSON object")
+    last_message = document.get("last_message")
+    return Robot(
+        name=text_field(document, "robot"),
+        up=flag_field(document, "up"),
+        last_message=None if last_message is None else number_field(document, "last_message"),
+        generated_at=number_field(document, "generated_at"),
+        components=[component_from_document(item) for item in list_field(document, "components")],
+    )
+
+
+def component_from_document(document: object) -> Component:
+    """One entry of the answer's `components`; CheckError when its fields are missing or mistyped."""
+    if not isinstance(document, dict):
+        raise CheckError("a component is not a JSON object")
+    level = document.get("level")
+    if level not in (0, 1, 2, 3) or not isinstance(level, int) or isinstance(level, bool):
+        raise CheckError(f"component level {level!r} is not 0, 1, 2 or 3")
+    return Component(
+        name=text_field(document, "name"),
+        hardware_id=text_field(document, "hardware_id"),
+        level=level,
+        message=text_field(document, "message"),
+        values=[key_value(item) for item in list_field(document, "values")],
+    )
+
+
+def key_value(document: object) -> tuple[str, str]:
+    """One `{"key": ..., "value": ...}` entry of a component's values."""
+    if not isinstance(document, dict):
+        raise CheckError("a key-value is not a JSON object")
+    return text_field(document, "key"), text_field(document, "value")
+
+
+def text_field(document: dict[str, object], key: str) -> str:
+    """`document[key]` when it is a JSON string; CheckError otherwise."""
+    value = document.get(key)
+    if not isinstance(value, str):
+        raise CheckError(f"{key!r} is missing or not a JSON string")
+    return value
+
+
+def flag_field(document: dict[str, object], key: str) -> bool:
+    """`document[key]` when it is a JSON boolean; CheckError otherwise."""
+    value = document.get(key)
+    if not isinstance(value, bool):
+        raise CheckError(f"{key!r} is missing or not a JSON boolean")
+    return value
+
+
+def list_field(document: dict[str, object], key: str) -> list[object]:
+    """`document[key]` when it is a JSON array; CheckError otherwise."""
+    value = document.get(key)
+    if not isinstance(value, list):
+        raise CheckError(f"{key!r} is missing or not a JSON array")
+    return value
+
+
+def number_field(document: dict[str, object], key: str) -> float:
+    """`document[key]` when it is a JSON number; CheckError otherwise."""
+    value = document.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CheckError(f"{key!r} is missing or not a JSON number")
+    return value
+
+
+def worst_state(states: list[int]) -> int:
+    """The most severe Nagios state by CRITICAL > WARNING > UNKNOWN > OK; OK when empty."""
+    return max(states, key=_SEVERITY_RANK.__getitem__, default=OK)
+
+
+def state_of(component: Component, stale_state: int) -> int:
+    """The Nagios state of a component: its level, or `stale_state` when it is stale."""
+    return stale_state if component.level == STALE_LEVEL else component.level
+
+
+def select(components: list[Component], settings: Settings) -> list[Component]:
+    """The components whose name contains `settings.name` (any case) and matches `settings.name_regex`."""
+    needle = settings.name.casefold()
+    pattern = settings.name_regex
+    return [
+        component
+        for component in components
+        if needle in component.name.casefold() and (pattern is None or pattern.search(component.name))
+    ]
+
+
+def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
+    """The exit state and the full plugin output (status line, long output) for `robot`."""
+    name = clean(robot.name)
+    if not robot.up:
+        return (
+            settings.stale_state,
+            f"{STATE_NAMES[settings.stale_state]} - {name} is down: {down_text(robot)}",
+        )
+    components = sorted(select(robot.components, settings), key=lambda c: (c.name, c.hardware_id))
+    if not components:
+        return UNKNOWN, f"UNKNOWN - {name}: {clean(no_match_text(robot, settings))}"
+    states = [state_of(component, settings.stale_state) for component in components]
+    state = worst_state(states)
+    first_line = (
+        f"{STATE_NAMES[state]} - {name}: {summary(components, states, state)}"
+        f" | {perfdata(components, settings.perfdata_values)}"
+    )
+    return state, "\n".join([first_line, *long_output(components, states, settings)])
+
+
+def down_text(robot: Robot) -> str:
+    """Why a robot is down: silent for how long, or never heard from."""
+    if robot.last_message is None:
+        return "the exporter knows it but never received its diagnostics"
+    silent_seconds = max(0, round(robot.generated_at - robot.last_message))
+    return f"no diagnostics received for {silent_seconds} s"
+
+
+def no_match_text(robot: Robot, settings: Settings) -> str:
+    """Why no component is left to judge."""
+    if not robot.components:
+        return "the robot reports no components"
+    wanted = []
+    if settings.name:
+        wanted.append(f"name containing {settings.name!r}")
+    if settings.name_regex is not None:
+        wanted.append(f"name matching /{settings.name_regex.pattern}/")
+    return f"no component with {' and '.join(wanted)} among its {len(robot.components)} components"
+
+
+def summary(components: list[Component], states: list[int], state: int) -> str:
+    """The status line's text: the components in the worst state with their messages, or all is well."""
+    if state == OK:
+        return f"{len(components)} component{'s' if len(components) != 1 else ''} OK"
+    worst = leaves_first([c for c, s in zip(components, states, strict=True) if s == state])
+    named = ", ".join(f"{clean(c.name)} ({short_message(c)})" for c in worst[:_SUMMARY_COMPONENTS])
+    more = len(worst) - _SUMMARY_COMPONENTS
+    others = [
+        f"{count} {STATE_NAMES[other]}"
+        for other in (CRITICAL, WARNING, UNKNOWN)
+        if other != state and (count := states.count(other))
+    ]
+    return (
+        named + (f" and {more} more" if more > 0 else "") + (f" (also {', '.join(others)})" if others else "")
+    )
+
+
+def leaves_first(components: list[Component]) -> list[Component]:
+    """`components` with group statuses (names that prefix another's) after the leaves they summarise."""
+    names = [component.name for component in components]
+
+    def is_group(component: Component) -> bool:
+        prefix = component.name.rstrip("/") + "/"
+        return any(name.startswith(prefix) for name in names)
+
+    return sorted(components, key=is_group)
+
+
+def short_message(component: Component) -> str:
+    """A component's message cut for the status line; stale ones say so."""
+    message = clean(component.message)
+    if component.level == STALE_LEVEL:
+        message = f"stale: {message}" if message else "stale"
+    if len(message) > _SUMMARY_MESSAGE_CHARS:
+        message = message[: _SUMMARY_MESSAGE_CHARS - 3].rstrip() + "..."
+    return message or "no message"
+
+
+def long_output(components: list[Component], states: list[int], settings: Settings) -> list[str]:
+    """The paper's sensor lists: CRITICAL, WARNING, stale, OK sections, each component with its message."""
+    headers = (
+        "CRITICAL sensor(s) list:",
+        "WARNING sensor(s) list:",
+        f"{STATE_NAMES[settings.stale_state]} (stale) sensor(s) list:",
+        "OK sensor(s) list:",
+    )
+    sections: list[list[str]] = [[] for _ in headers]
+    for component, state in zip(components, states, strict=True):
+        sections[section_of(component, state)].append(component_line(component, settings.verbosity))
+    lines = []
+    for header, members in zip(headers, sections, strict=True):
+        if members:
+            lines.append(header)
+            lines.extend(members)
+    return lines
+
+
+def section_of(component: Component, state: int) -> int:
+    """The long-output section of a component: 0 CRITICAL, 1 WARNING, 2 stale (whatever its state), 3 OK."""
+    return 2 if component.level == STALE_LEVEL else (3, 1, 0)[state]
+
+
+def component_line(component: Component, verbosity: int) -> str:
+    """One long-output line: name, hardware id when set, message, and key-values when verbose."""
+    line = clean(component.name)
+    if component.hardware_id:
+        line += f" [{clean(component.hardware_id)}]"
+    line += f": {clean(component.message)}"
+    if verbosity > 0 and component.values:
+        line += " (" + ", ".join(f"{clean(key)}={clean(value)}" for key, value in component.values) + ")"
+    return line
+
+
+def clean(text: str) -> str:
+    """`text` on one line and without `|`, which would start the performance data."""
+    return " ".join(text.replace("|", "¦").split())
+
+
+def perfdata(components: list[Component], with_values: bool) -> str:
+    """Counts per level, then (when asked) every numeric key-value, in Nagios perfdata syntax."""
+    levels = [component.level for component in components]
+    counts = [f"'{label}'={levels.count(level)};;;0" for label, level in _COUNT_LABELS]
+    if with_values:
+        counts.extend(value_perfdata(components))
+    return " ".join(counts)
+
+
+def value_perfdata(components: list[Component]) -> list[str]:
+    """`'<component>:<key>'=<number>;;;;` for every key-value that is a finite number."""
+    items = []
+    for component in components:
+        prefix = component.name + (f"[{component.hardware_id}]" if component.hardware_id else "")
+        for key, text in component.values:
+            number = parse_number(text)
+            if number is not None:
+                items.append(f"{perf_label(prefix + ':' + key)}={perf_number(number)};;;;")
+    return items
+
+
+def parse_number(text: str) -> float | None:
+    """The finite number `text` spells in plain decimal or exponent notation, else None (NaN too)."""
+    import re  # only --perfdata-values pays for it
+
+    text = text.strip()
+    if not re.fullmatch(_NUMBER, text):
+        return None
+    number = float(text)
+    return number if abs(number) != float("inf") else None
+
+
+def perf_number(number: float) -> str:
+    """`number` in plain decimal notation, as the perfdata grammar ([-0-9.]) wants: no exponent."""
+    text = repr(number)
+    if "e" not in text:
+        return text.removesuffix(".0")
+    mantissa, exponent = text.split("e")
+    decimals = len(mantissa.partition(".")[2]) - int(exponent)
+    return f"{number:.{max(decimals, 0)}f}"
+
+
+def perf_label(label: str) -> str:
+    """A quoted perfdata label: quotes doubled, `=` and `|` (which end a label) replaced."""
+    return "'" + clean(label).replace("'", "''").replace("=", "_") + "'"

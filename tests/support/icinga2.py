@@ -1,0 +1,195 @@
+"""A real Icinga 2 daemon for tests: temporary directories, loopback REST API, always stopped.
+
+It runs as root with every path (config, data, log, cache, spool, run) moved into a temporary
+directory, loads the ITL, the shipped deploy/icinga2 files and a test-only objects file, and
+exposes its API on a free loopback port with certificates made by `icinga2 pki`.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import ssl
+import subprocess
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from support.nagios import REPO, PluginResult, join_output, stop_process_group
+from support.ports import free_port
+from support.processes import VENV_BIN, wait_for
+
+ICINGA2 = "/usr/sbin/icinga2"
+ICINGA2_DEPLOY = REPO / "deploy" / "icinga2"
+NODE_NAME = "overseer-test"
+API_USER = "overseer-test"
+API_PASSWORD = "overseer-test-password"
+_DIRECTORIES = ("ConfigDir", "DataDir", "LogDir", "CacheDir", "SpoolDir", "InitRunDir")
+
+
+def defines(root: Path) -> list[str]:
+    """`-D` options that move every Icinga 2 path under `root` and keep it running as root."""
+    options = [f"-DConfiguration.{name}={root / name.lower()}" for name in _DIRECTORIES]
+    return [
+        *options,
+        f"-DConfiguration.PidPath={root / 'initrundir' / 'icinga2.pid'}",
+        "-DConfiguration.RunAsUser=root",
+        "-DConfiguration.RunAsGroup=root",
+    ]
+
+
+def icinga2(root: Path, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+    """Run an `icinga2` command with the paths under `root`."""
+    return subprocess.run(
+        [ICINGA2, *args, *defines(root)], capture_output=True, text=True, timeout=timeout, check=False
+    )
+
+
+def write_icinga2_config(root: Path, objects: str, api_port: int | None = None) -> Path:
+    """A main icinga2.conf under `root`: ITL, checker, the shipped deploy/icinga2 files and `objects`.
+
+    With `api_port`, also the REST API on that loopback port (which needs `make_certificates`).
+    PluginContribDir points at the environment's bin directory, so the shipped CheckCommand runs
+    this checkout's check_ros_diagnostics.
+    """
+    for name in _DIRECTORIES:
+        (root / name.lower()).mkdir(parents=True, exist_ok=True)
+    (root / "objects.conf").write_text(objects, encoding="utf-8")
+    main_config = root / "configdir" / "icinga2.conf"
+    main_config.write_text(
+        f"""const NodeName = "{NODE_NAME}"
+const ZoneName = NodeName
+const PluginDir = "/usr/lib/nagios/plugins"
+const PluginContribDir = "{VENV_BIN}"
+
+include <itl>
+
+object FileLogger "main-log" {{
+	path = LogDir + "/icinga2.log"
+	severity = "information"
+}}
+object CheckerComponent "checker" {{ }}
+{api_objects(api_port) if api_port is not None else ""}
+include "{ICINGA2_DEPLOY}/*.conf"
+include "{root / "objects.conf"}"
+""",
+        encoding="utf-8",
+    )
+    return main_config
+
+
+def api_objects(api_port: int) -> str:
+    """The objects that serve the REST API on 127.0.0.1:`api_port` to the test's ApiUser."""
+    return f"""object Endpoint NodeName {{ }}
+object Zone ZoneName {{
+	endpoints = [ NodeName ]
+}}
+object ApiListener "api" {{
+	bind_host = "127.0.0.1"
+	bind_port = {api_port}
+}}
+object ApiUser "{API_USER}" {{
+	password = "{API_PASSWORD}"
+	permissions = [ "*" ]
+}}
+"""
+
+
+def make_certificates(root: Path) -> None:
+    """A CA and the node's certificate, where the ApiListener looks for them (DataDir/certs)."""
+    certs = root / "datadir" / "certs"
+    certs.mkdir(parents=True, exist_ok=True)
+    key, csr, cert = (certs / f"{NODE_NAME}.{suffix}" for suffix in ("key", "csr", "crt"))
+    for args in (
+        ("pki", "new-ca"),
+        ("pki", "new-cert", "--cn", NODE_NAME, "--key", str(key), "--csr", str(csr)),
+        ("pki", "sign-csr", "--csr", str(csr), "--cert", str(cert)),
+    ):
+        done = icinga2(root, *args)
+        assert done.returncode == 0, f"icinga2 {' '.join(args)} failed:\n{done.stdout}{done.stderr}"
+    (certs / "ca.crt").write_bytes((root / "datadir" / "ca" / "ca.crt").read_bytes())
+
+
+@dataclass
+class Icinga2:
+    """A running Icinga 2 daemon and its REST API."""
+
+    process: subprocess.Popen[bytes]
+    root: Path
+    api_port: int
+
+    def api(self, method: str, path: str, body: dict[str, Any]) -> Any:
+        """Call the REST API (GET as POST with X-HTTP-Method-Override, so it can carry a body)."""
+        context = ssl.create_default_context(cafile=str(self.root / "datadir" / "certs" / "ca.crt"))
+        context.check_hostname = False  # the certificate names the node, not 127.0.0.1
+        request = urllib.request.Request(
+            f"https://127.0.0.1:{self.api_port}{path}",
+            data=json.dumps(body).encode(),
+            method="POST",
+            headers={"Accept": "application/json", "X-HTTP-Method-Override": method},
+        )
+        token = base64.b64encode(f"{API_USER}:{API_PASSWORD}".encode()).decode()
+        request.add_header("Authorization", f"Basic {token}")
+        with urllib.request.urlopen(request, context=context, timeout=10) as response:
+            return json.load(response)
+
+    def reschedule(self, host: str, service: str) -> None:
+        """Ask for the service's check to run now."""
+        self.api(
+            "POST",
+            "/v1/actions/reschedule-check",
+            {"type": "Service", "service": f"{host}!{service}", "force": True},
+        )
+
+    def result(self, host: str, service: str) -> PluginResult | None:
+        """The service's last check result in plugin format, None before its first check."""
+        answer = self.api("GET", "/v1/objects/services", {"service": f"{host}!{service}"})
+        last = answer["results"][0]["attrs"]["last_check_result"]
+        if last is None:
+            return None
+        text, _, long_output = last["output"].partition("\n")
+        perfdata = " ".join(quote_label(item) for item in last["performance_data"])
+        return PluginResult(int(last["exit_status"]), join_output(text, perfdata, long_output))
+
+    def log(self) -> str:
+        """The daemon's main log."""
+        return (self.root / "logdir" / "icinga2.log").read_text(encoding="utf-8", errors="replace")
+
+
+def quote_label(item: str) -> str:
+    """A perfdata item with its label quoted, as the check writes it (Icinga 2 drops needless quotes)."""
+    return item if item.startswith("'") else "'" + item.replace("=", "'=", 1)
+
+
+@contextmanager
+def running_icinga2(root: Path, objects: str) -> Iterator[Icinga2]:
+    """Run Icinga 2 with the shipped definitions and `objects` until the block ends, then stop it."""
+    api_port = free_port()
+    main_config = write_icinga2_config(root, objects, api_port)
+    make_certificates(root)
+    log = (root / "daemon.out").open("wb")
+    process = subprocess.Popen(
+        [ICINGA2, "daemon", "-c", str(main_config), *defines(root)],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+    log.close()
+    daemon = Icinga2(process, root, api_port)
+    try:
+        wait_for(lambda: api_is_up(daemon), timeout=60, message="the Icinga 2 API")
+        yield daemon
+    finally:
+        stop_process_group(process)
+
+
+def api_is_up(daemon: Icinga2) -> bool:
+    """Whether the API answers; RuntimeError with the daemon's output if it has exited."""
+    if daemon.process.poll() is not None:
+        output = (daemon.root / "daemon.out").read_text(encoding="utf-8", errors="replace")
+        raise RuntimeError(f"icinga2 exited with {daemon.process.returncode}:\n{output}")
+    daemon.api("GET", "/v1/status/IcingaApplication", {})
+    return True
