@@ -133,6 +133,13 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--vary-values", action="store_true", help="change each robot's battery voltage at every publication"
     )
+    parser.add_argument(
+        "--wait-for-subscribers",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="before publishing, wait up to SECONDS until every robot has a subscriber (benchmarks)",
+    )
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     parser.add_argument(
         "--event",
@@ -236,6 +243,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         topic=args.topic,
         loopback_only=args.loopback_only,
         vary_values=args.vary_values,
+        wait_for_subscribers=args.wait_for_subscribers,
         events=events,
     )
 
@@ -257,6 +265,7 @@ def _simulate(args: argparse.Namespace) -> int:
         flush=True,
     )
     simulator.run(args.duration)
+    print(f"published {simulator.published} messages", flush=True)
     return 0
 
 

@@ -105,6 +105,7 @@ class SimulatorSettings:
     topic: str = AGGREGATED
     loopback_only: bool = False
     vary_values: bool = False
+    wait_for_subscribers: float = 0.0  # seconds to wait until every writer has a matched reader
     events: list[Event] = field(default_factory=list)
 
 
@@ -134,6 +135,7 @@ class FleetSimulator:
         self._participants: dict[int, DomainParticipant] = {}
         self._writers: dict[str, DataWriter[DdsDiagnosticArray]] = {}
         self._stop = threading.Event()
+        self.published = 0
 
     def robot_name(self, index: int) -> str:
         """The name of the robot at `index` (robot1 … robotN); its namespace unless on separate domains."""
@@ -152,6 +154,9 @@ class FleetSimulator:
         tick = 0
         for robot in self.robots:
             self._open_writer(robot)
+        if self.settings.wait_for_subscribers:
+            self.wait_for_subscribers(self.settings.wait_for_subscribers)
+            started = time.monotonic()
         while not self._stop.is_set():
             elapsed = time.monotonic() - started
             if duration is not None and elapsed >= duration:
@@ -162,6 +167,16 @@ class FleetSimulator:
             tick += 1
             self._stop.wait(max(0.0, started + tick * period - time.monotonic()))
         self.close()
+
+    def wait_for_subscribers(self, timeout: float) -> bool:
+        """Wait until every robot's writer has a matched reader; False when `timeout` passed first."""
+        deadline = time.monotonic() + timeout
+        while not self._stop.is_set() and time.monotonic() < deadline:
+            if all(writer.get_matched_subscriptions() for writer in self._writers.values()):
+                return True
+            self._stop.wait(0.1)
+        log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)
+        return False
 
     def stop(self) -> None:
         """Ask `run` to return."""
@@ -188,6 +203,7 @@ class FleetSimulator:
                 log.warning("writing %s failed with DDS error %d", robot.name, result)
             else:
                 written += 1
+        self.published += written
         return written
 
     def encode(self, robot: SimulatedRobot) -> bytes:
