@@ -41,6 +41,8 @@ def fleet() -> tuple[FleetModel, Clock]:
         )
         model.apply(f"robot{index}/{name}", DiagnosticArray(0, 0, "", statuses), "dds")
     model.count_message("ros1", "decode_error")
+    model.count_source_error("ros1", "master_unreachable")
+    model.count_source_error("ros1", 'odd "reason"')
     return model, clock
 
 

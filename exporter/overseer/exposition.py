@@ -99,6 +99,12 @@ class FleetExposition:
             tail.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {go_float(dropped)}\n')
         tail.append(headers["overseer_strings_truncated"])
         tail.append(f"overseer_strings_truncated_total {go_float(float(snapshot.truncated_strings))}\n")
+        tail.append(headers["overseer_source_errors"])
+        for (transport, reason), count in sorted(snapshot.source_errors.items()):
+            tail.append(
+                f'overseer_source_errors_total{{reason="{escape_label_value(reason)}",'
+                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
+            )
         tail.append(headers["overseer_build_info"])
         tail.append(f'overseer_build_info{{version="{escape_label_value(__version__)}"}} 1.0\n')
         return b"".join(

@@ -80,6 +80,8 @@ class FleetCollector(Collector):
         for reason in DROP_REASONS:
             families.dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
         families.truncated.add_metric([], float(snapshot.truncated_strings))
+        for (transport, reason), count in sorted(snapshot.source_errors.items()):
+            families.source_errors.add_metric([transport, reason], float(count))
         families.build.add_metric([__version__], 1.0)
         yield from families.all()
 
@@ -152,6 +154,7 @@ class _Families:
     messages: CounterMetricFamily
     dropped: CounterMetricFamily
     truncated: CounterMetricFamily
+    source_errors: CounterMetricFamily
     build: GaugeMetricFamily
 
     def all(self) -> tuple[Metric, ...]:
@@ -204,6 +207,11 @@ class _Families:
             ),
             CounterMetricFamily(
                 "overseer_strings_truncated", "Names, messages and key-values cut to max_string_length."
+            ),
+            CounterMetricFamily(
+                "overseer_source_errors",
+                "Failures to reach robots by transport and reason, such as an unreachable ROS 1 master.",
+                labels=["transport", "reason"],
             ),
             GaugeMetricFamily("overseer_build_info", "Overseer's version; always 1.", labels=["version"]),
         )

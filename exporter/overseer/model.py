@@ -82,6 +82,7 @@ class FleetSnapshot:
     message_counts: Mapping[tuple[str, str], int] = field(default_factory=dict)
     dropped_statuses: Mapping[str, int] = field(default_factory=dict)
     truncated_strings: int = 0
+    source_errors: Mapping[tuple[str, str], int] = field(default_factory=dict)
 
     def robot_up(self, robot: RobotState) -> bool:
         """True while the robot's messages arrive within `robot_timeout`."""
@@ -132,6 +133,12 @@ class FleetModel:
         self._message_counts: Counter[tuple[str, str]] = Counter()
         self._dropped_statuses: Counter[str] = Counter()
         self._truncated_strings = 0
+        self._source_errors: Counter[tuple[str, str]] = Counter()
+
+    def count_source_error(self, transport: str, reason: str) -> None:
+        """Count one failure of a transport to reach a robot (an unreachable master, a lost connection)."""
+        with self._lock:
+            self._source_errors[(transport, reason)] += 1
 
     def count_message(self, transport: str, result: str) -> None:
         """Count one message by its result (received, decode_error, dropped)."""
@@ -280,7 +287,8 @@ class FleetModel:
             counts = dict(self._message_counts)
             dropped = dict(self._dropped_statuses)
             truncated = self._truncated_strings
-        return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated)
+            errors = dict(self._source_errors)
+        return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated, errors)
 
 
 def _component(
