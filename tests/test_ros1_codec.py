@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from rosbags.typesys import Stores, get_typestore
 
 from overseer.codec import DecodeError
-from overseer.codec.ros1 import decode_diagnostic_array, encode_diagnostic_array, same_content
+from overseer.codec.ros1 import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support.ros1 import genpy
 
@@ -166,17 +166,6 @@ def test_stamp_after_2038_is_unsigned_as_in_genpy() -> None:
     array = DiagnosticArray(3_000_000_000, 1, "", ())
     (payload,) = genpy("serialize", [as_json(array, 0)])
     assert decode_diagnostic_array(payload).stamp_sec == 3_000_000_000
-
-
-def test_same_content_ignores_only_seq_and_stamp() -> None:
-    array = EXAMPLES["paper robot"][0]
-    payload = encode_diagnostic_array(array, 1)
-    assert same_content(encode_diagnostic_array(array._replace(stamp_sec=9, stamp_nanosec=9), 2), payload)
-    assert not same_content(encode_diagnostic_array(array._replace(frame_id="map"), 1), payload)
-    changed = array.statuses[0]._replace(level=2)
-    assert not same_content(
-        encode_diagnostic_array(array._replace(statuses=(changed, *array.statuses[1:])), 1), payload
-    )
 
 
 def test_invalid_utf8_is_replaced_not_rejected() -> None:

@@ -54,11 +54,6 @@ def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
     return DiagnosticArray(sec, nanosec, frame_id, tuple(statuses))
 
 
-def same_content(payload: bytes, previous: bytes) -> bool:
-    """True when two serialized arrays differ at most in their header's seq and stamp (bytes 0 to 12)."""
-    return len(payload) == len(previous) and payload[_HEADER.size :] == previous[_HEADER.size :]
-
-
 def _read_count(payload: bytes, pos: int, end: int, min_item_bytes: int, what: str) -> tuple[int, int]:
     if pos + 4 > end:
         raise DecodeError(f"payload ends before a {what} count")

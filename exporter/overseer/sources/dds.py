@@ -22,6 +22,7 @@ from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from overseer.codec import DecodeError
 from overseer.codec.cdr import decode_diagnostic_array
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
@@ -167,7 +168,10 @@ class DdsSource:
                         return
                     for data, info in samples:
                         if info.valid_data:
-                            ingest(data)
+                            try:
+                                ingest(data)
+                            except DecodeError as error:
+                                log.debug("undecodable sample on %s: %s", topic_name, error)
                     if len(samples) < _TAKE_BATCH:
                         return
             except Exception:  # a callback from the DDS thread must never raise

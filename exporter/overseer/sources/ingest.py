@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 
 from overseer.codec import DecodeError
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetModel
-
-log = logging.getLogger(__name__)
 
 
 class PayloadIngest:
@@ -37,8 +34,8 @@ class PayloadIngest:
         self._start, self._end = ignored
         self._previous = b""
 
-    def __call__(self, payload: bytes) -> bool:
-        """Apply one payload; False when it could not be decoded (counted as decode_error)."""
+    def __call__(self, payload: bytes) -> None:
+        """Apply one payload; DecodeError (counted as decode_error) when it is not a DiagnosticArray."""
         previous = self._previous
         if (
             len(payload) == len(previous)
@@ -46,13 +43,11 @@ class PayloadIngest:
             and payload[: self._start] == previous[: self._start]
             and self._model.touch(self._robot, self._transport)
         ):
-            return True
+            return
         try:
             array = self._decode(payload)
-        except DecodeError as error:
+        except DecodeError:
             self._model.count_message(self._transport, "decode_error")
-            log.debug("undecodable payload on %s: %s", self._topic, error)
-            return False
+            raise
         self._model.apply(self._robot, array, self._transport, self._topic)
         self._previous = payload
-        return True

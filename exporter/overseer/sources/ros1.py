@@ -18,9 +18,10 @@ import time
 from typing import Any
 
 from overseer.codec import DecodeError
-from overseer.codec.ros1 import MESSAGE_TYPE, decode_diagnostic_array, same_content
+from overseer.codec.ros1 import MESSAGE_TYPE, decode_diagnostic_array
 from overseer.config import Ros1Config, Ros1Robot
 from overseer.model import FleetModel
+from overseer.sources.ingest import PayloadIngest
 from overseer.sources.ros1_slave import SlaveApi
 from overseer.sources.ros1_tcpros import TcprosError, read_frame, subscribe
 from overseer.sources.ros1_xmlrpc import (
@@ -34,6 +35,7 @@ from overseer.sources.ros1_xmlrpc import (
 log = logging.getLogger(__name__)
 
 TRANSPORT = "ros1"
+ROS1_STAMP = (0, 12)  # the header's seq and stamp, which change in every republished array
 UNREGISTER_TIMEOUT_SECONDS = 1.0
 STOP_TIMEOUT_SECONDS = 5.0
 # Aggregators publish at 1 Hz, so only long silence means a dead connection rather than a quiet one.
@@ -143,7 +145,9 @@ class _RobotLink:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._apply_lock = threading.Lock()
-        self._last_payload = b""
+        self._ingest = PayloadIngest(
+            model, robot.name, TRANSPORT, self.topic, decode_diagnostic_array, ROS1_STAMP
+        )
         self._publishers: dict[str, _PublisherLink] = {}
         self._retired: list[_PublisherLink] = []
         self._caller_api: str | None = None
@@ -240,12 +244,8 @@ class _RobotLink:
         A payload that differs from the robot's last one only in seq and stamp just refreshes the robot,
         with no decoding; the lock keeps "last one" true when several publishers feed one robot.
         """
-        name = self.robot.name
         with self._apply_lock:
-            if same_content(payload, self._last_payload) and self.model.touch(name, TRANSPORT):
-                return
-            self.model.apply(name, decode_diagnostic_array(payload), TRANSPORT, self.topic)
-            self._last_payload = payload
+            self._ingest(payload)
 
     def _close(self, registered: bool) -> None:
         if registered and self._caller_api is not None:
@@ -366,8 +366,7 @@ class _PublisherLink:
             while True:
                 robot.receive(read_frame(sock))
                 backoff.reset()
-        except DecodeError as error:
-            robot.model.count_message(TRANSPORT, "decode_error")
+        except DecodeError as error:  # already counted as decode_error by the ingest
             return "decode_error", f"undecodable message: {error}"
         except RosApiError as error:
             return ("publisher_unreachable" if error.unreachable else "publisher_error"), str(error)
