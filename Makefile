@@ -21,10 +21,14 @@ system-deps:
 demo: setup
 	$(BIN)/overseer demo
 
-lint: setup
+lint: setup system-deps
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
+	promtool check rules alert_rules/overseer.rules.yml alert_rules/overseer-fast.rules.yml
+	promtool test rules alert_rules/overseer.rules.test.yml
+	promtool check config deploy/prometheus/prometheus.yml deploy/prometheus/prometheus-fast.yml
+	amtool check-config alert_rules/alertmanager.example.yml
 
 test: setup system-deps lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)

@@ -1,0 +1,73 @@
+"""Debian's Alertmanager on loopback for tests, configured from the shipped example."""
+
+from __future__ import annotations
+
+import json
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from support.ports import free_port
+from support.processes import RunningProcess, spawn
+from support.prometheus import REPO, wait_until_ready
+
+EXAMPLE = REPO / "alert_rules" / "alertmanager.example.yml"
+
+
+@dataclass
+class Alertmanager(RunningProcess):
+    """A running Alertmanager and its base URL."""
+
+    url: str
+
+    def alerts(self) -> list[dict[str, Any]]:
+        """Every alert it holds, with `status.state` active or suppressed and `status.inhibitedBy`."""
+        with urllib.request.urlopen(self.url + "/api/v2/alerts", timeout=10) as response:
+            result: list[dict[str, Any]] = json.load(response)
+            return result
+
+
+def example_config(webhook_url: str, timing: dict[str, str] | None = None) -> dict[str, Any]:
+    """The shipped example with every receiver posting to `webhook_url`/<receiver name>.
+
+    `timing` (e.g. group_wait, group_interval) replaces those settings on every route when given.
+    """
+    config: dict[str, Any] = yaml.safe_load(EXAMPLE.read_text(encoding="utf-8"))
+    for receiver in config["receivers"]:
+        for webhook in receiver["webhook_configs"]:
+            webhook["url"] = f"{webhook_url}/{receiver['name']}"
+    routes = [config["route"]]
+    while timing and routes:
+        route = routes.pop()
+        route.update(timing)
+        routes.extend(route.get("routes", []))
+    return config
+
+
+@contextmanager
+def running_alertmanager(tmp_path: Path, config: dict[str, Any]) -> Iterator[Alertmanager]:
+    """Run Debian's `prometheus-alertmanager` on loopback, clustering off, until the block ends."""
+    port = free_port()
+    directory = tmp_path / f"alertmanager-{port}"
+    directory.mkdir()
+    config_path = directory / "alertmanager.yml"
+    config_path.write_text(yaml.safe_dump(config), encoding="utf-8")
+    args = [
+        "prometheus-alertmanager",
+        f"--config.file={config_path}",
+        f"--storage.path={directory / 'data'}",
+        f"--web.listen-address=127.0.0.1:{port}",
+        "--cluster.listen-address=",
+    ]
+    log_path = directory / "alertmanager.log"
+    alertmanager = Alertmanager(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    try:
+        wait_until_ready(alertmanager, alertmanager.url + "/-/ready")
+        yield alertmanager
+    finally:
+        alertmanager.stop()
