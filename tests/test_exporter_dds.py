@@ -10,6 +10,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
+from support.ports import fresh_domain_id
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 
 FAST = ("--fleet.stale-after=1s", "--fleet.robot-timeout=2s")
@@ -175,8 +176,8 @@ def test_nested_namespace_is_kept_whole(tmp_path: Path, dds_domain: int) -> None
         assert 'robot="site_a/robot1"' in exporter.get("/metrics").decode()
 
 
-def test_robots_on_their_own_domains_are_named_by_config(tmp_path: Path, dds_domain: int) -> None:
-    domain = min(dds_domain, 230)
+def test_robots_on_their_own_domains_are_named_by_config(tmp_path: Path) -> None:
+    domain = fresh_domain_id(2)
     config = tmp_path / "overseer.yml"
     config.write_text(
         "dds:\n  domains:\n"
