@@ -250,6 +250,6 @@ class FleetSimulator:
     def _participant(self, domain_id: int) -> DomainParticipant:
         if domain_id not in self._participants:
             if self.settings.loopback_only:
-                configure_domain(domain_id, loopback_only_config())
+                configure_domain(domain_id, loopback_only_config(), keep_existing=True)
             self._participants[domain_id] = DomainParticipant(domain_id)
         return self._participants[domain_id]

@@ -31,15 +31,16 @@ def loopback_only_config() -> str:
     )
 
 
-def configure_domain(domain_id: int, config: str) -> None:
+def configure_domain(domain_id: int, config: str, *, keep_existing: bool = False) -> None:
     """Give `domain_id` the Cyclone `config` (XML or URI) for the rest of this process.
 
-    Cyclone accepts one explicit configuration per domain and process, so the exporter and the
-    simulator of `overseer demo` share it; asking for a different one is an error.
+    Cyclone accepts one explicit configuration per domain and process. Asking for a different one is
+    an error, unless `keep_existing` says the one already there will do (the simulator of
+    `overseer demo` joins the domain the exporter configured).
     """
     with _lock:
         existing = _domains.get(domain_id)
         if existing is None:
             _domains[domain_id] = (config, Domain(domain_id, config))
-        elif existing[0] != config:
+        elif existing[0] != config and not keep_existing:
             raise ValueError(f"DDS domain {domain_id} is already configured differently in this process")
