@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from overseer.levels import Level, level_from_wire, worst
+from overseer.levels import Level, worst
 
 
 @pytest.mark.parametrize(
@@ -25,8 +25,3 @@ def test_worst_follows_severity_not_numeric_order(levels: list[Level], expected:
 
 def test_levels_match_nagios_exit_codes() -> None:
     assert [int(level) for level in (Level.OK, Level.WARN, Level.ERROR, Level.STALE)] == [0, 1, 2, 3]
-
-
-@pytest.mark.parametrize(("wire", "expected"), [(0, Level.OK), (3, Level.STALE), (4, None), (255, None)])
-def test_wire_levels_outside_ros_range_are_rejected(wire: int, expected: Level | None) -> None:
-    assert level_from_wire(wire) is expected

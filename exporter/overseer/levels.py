@@ -35,10 +35,3 @@ def worst(levels: Iterable[Level]) -> Level:
             if rank == 3:
                 break
     return result
-
-
-def level_from_wire(value: int) -> Level | None:
-    """The level for a wire octet, or None when the value is not a ROS level."""
-    if 0 <= value <= 3:
-        return Level(value)
-    return None

@@ -16,10 +16,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
-from overseer.levels import Level, level_from_wire, worst
+from overseer.levels import Level, worst
 from overseer.messages import DiagnosticArray
 
 ComponentKey = tuple[str, str]  # (name, hardware_id)
+_LEVELS = tuple(Level)  # by wire value, faster than calling the enum
 
 
 @dataclass(frozen=True)
@@ -183,25 +184,25 @@ class FleetModel:
         truncated = 0
         prepared: list[tuple[ComponentKey, Level, str, tuple[tuple[str, str], ...]]] = []
         dropped: Counter[str] = Counter()
-        for status in array.statuses:
-            level = level_from_wire(status.level)
-            if level is None:
+        max_values = limits.max_values_per_component
+        for wire_level, name, message, hardware_id, values in array.statuses:
+            if not 0 <= wire_level <= 3:
                 dropped["invalid_level"] += 1
                 continue
-            name, hardware_id, message = status.name, status.hardware_id, status.message
             if len(name) > max_length or len(hardware_id) > max_length or len(message) > max_length:
                 truncated += (
                     (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
                 )
                 name, hardware_id, message = name[:max_length], hardware_id[:max_length], message[:max_length]
-            values = status.values
-            if len(values) > limits.max_values_per_component:
-                dropped["value_limit"] += len(values) - limits.max_values_per_component
-                values = values[: limits.max_values_per_component]
-            if any(len(k) > max_length or len(v) > max_length for k, v in values):
-                truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
-                values = tuple((k[:max_length], v[:max_length]) for k, v in values)
-            prepared.append(((name, hardware_id), level, message, values))
+            if len(values) > max_values:
+                dropped["value_limit"] += len(values) - max_values
+                values = values[:max_values]
+            for key, text in values:
+                if len(key) > max_length or len(text) > max_length:
+                    truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
+                    values = tuple((k[:max_length], v[:max_length]) for k, v in values)
+                    break
+            prepared.append(((name, hardware_id), _LEVELS[wire_level], message, values))
 
         with self._lock:
             state = self._robots.get(robot)
