@@ -197,8 +197,8 @@ class FleetModel:
             if len(values) > max_values:
                 dropped["value_limit"] += len(values) - max_values
                 values = values[:max_values]
-            for key, text in values:
-                if len(key) > max_length or len(text) > max_length:
+            for value_key, value_text in values:
+                if len(value_key) > max_length or len(value_text) > max_length:
                     truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
                     values = tuple((k[:max_length], v[:max_length]) for k, v in values)
                     break
