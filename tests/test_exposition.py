@@ -37,7 +37,13 @@ def fleet() -> tuple[FleetModel, Clock]:
             DiagnosticStatus(
                 index % 4, name or "/empty", name, name, ((name, "1.5"), ("v", "12 V"), ("v", "3"))
             ),
-            DiagnosticStatus(1, "/Motor", "warm", "m1", (("nan", "nan"), ("inf", "-inf"), ("big", "1e300"))),
+            DiagnosticStatus(
+                1,
+                "/Motor",
+                "warm",
+                "m1",
+                (("nan", "nan"), ("inf", "-inf"), ("big", "1e300"), ("z", "0"), ("nz", "-0")),
+            ),
         )
         model.apply(f"robot{index}/{name}", DiagnosticArray(0, 0, "", statuses), "dds")
     model.count_message("ros1", "decode_error")

@@ -190,6 +190,8 @@ class _RenderCache:
         return escaped
 
     def number(self, value: float) -> str:
+        if not value:  # 0.0 == -0.0 as keys, but they render differently
+            return go_float(value)
         formatted = self._formatted.get(value)
         if formatted is None:
             formatted = self._formatted[value] = go_float(value)
