@@ -76,6 +76,15 @@ def test_flags_override_the_file(tmp_path: Path) -> None:
         ("fleet:\n  stale_afer: 5s\n", "fleet.stale_afer: unknown key"),
         ("metrics:\n  value_keys: ['(']\n", "metrics.value_keys: '(' is not a regular expression"),
         ("log_level: loud\n", "log_level: expected one of debug, info, warning, error, got 'loud'"),
+        (
+            "ros1:\n  robots:\n    - {name: a, master_uri: 'http://h:11311'}\n"
+            "    - {name: b, master_uri: 'http://h:11311/'}\n",
+            "ros1.robots: each robot needs a master of its own",
+        ),
+        (
+            "ros1:\n  robots:\n    - {name: a, master_uri: 'ftp://h'}\n",
+            "ros1.robots[0].master_uri: expected http://",
+        ),
         ("- a list\n", "expected a mapping at the top"),
         ("fleet: [\n", "is not valid YAML"),
     ],

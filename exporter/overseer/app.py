@@ -14,6 +14,7 @@ from overseer.http import OverseerServer
 from overseer.metrics import FleetCollector
 from overseer.model import FleetModel
 from overseer.sources import Source
+from overseer.web_config import load_web_config
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +47,9 @@ class Exporter:
         value_keys = self.config.metrics.value_key_pattern
         registry.register(FleetCollector(self.model, value_keys, transports))
         exposition = FleetExposition(self.model, value_keys, transports)
-        self.server = OverseerServer(self.config.web.host_and_port, self.model, registry, exposition)
+        security = load_web_config(self.config.web.config_file)
+        address = self.config.web.host_and_port
+        self.server = OverseerServer(address, self.model, registry, exposition, security)
 
     def start(self) -> None:
         """Start the transports, the expiry timer and the HTTP server threads."""

@@ -7,10 +7,11 @@ measures it.
 
 from __future__ import annotations
 
+import os
 import sys
 
 from overseer import __version__, check_json
-from overseer.check_http import Answer, get, parse_url, quote_path
+from overseer.check_http import Answer, Tls, get, parse_url, quote_path
 from overseer.check_report import (
     CRITICAL,
     UNKNOWN,
@@ -27,11 +28,14 @@ if TYPE_CHECKING:
     import re
 
 PROGRAM = "check_ros_diagnostics"
+AUTH_VARIABLE = "CHECK_ROS_DIAGNOSTICS_AUTH"
 
 USAGE = f"""Usage:
  {PROGRAM} [-H <exporter host>] [-p <port>] | [--url <exporter URL>]  -r <robot>
    [-n <text>] [--name-regex <regex>] [--stale-state unknown|warning|critical] [--perfdata-values]
-   [-a <user:password>] [--ca-file <file>] [--insecure] [-t <seconds>] [-v] [-V] [-h]"""
+   [--authorization-file <file> | -a <user:password>] [--ca-file <file>] [--insecure]
+   [--client-cert <file> [--client-key <file>]] [-t <seconds>] [-v] [-V] [-h]
+ {PROGRAM} --ros-master <ROS 1 master URL> [--ros-topic diagnostics_agg|diagnostics] -r <robot> [...]"""
 
 HELP = f"""{PROGRAM} {__version__} (Overseer)
 Checks one ROS robot's diagnostics as the Overseer exporter sees them (its JSON API, so the same
@@ -53,6 +57,11 @@ Options:
     Base URL of the exporter instead of -H/-p, e.g. https://overseer.example:9849 or a proxy path
  -r, --robot=NAME
     The robot as the exporter names it (its ROS namespace, e.g. robot1 or site_a/robot7)
+ --ros-master=URL
+    No exporter: read one message straight from a ROS 1 robot's master and publisher, as the
+    paper's plugin did (e.g. http://10.0.0.5:11311); same output, waits at most --timeout
+ --ros-topic=TOPIC
+    With --ros-master: diagnostics_agg (default) or diagnostics
  -n, --name=TEXT
     Judge only components whose name contains TEXT, ignoring case (e.g. battery); empty: all
  --name-regex=REGEX
@@ -61,12 +70,20 @@ Options:
     State for stale components and for a robot that is down: unknown (default), warning, critical
  --perfdata-values
     Add the numeric key-values of the judged components to the perfdata ('<component>:<key>')
+ --authorization-file=FILE
+    Basic authentication: FILE's first line is USER:PASSWORD (make it readable by the monitoring user
+    only). Without it or -a, the environment variable CHECK_ROS_DIAGNOSTICS_AUTH=USER:PASSWORD is used
  -a, --authorization=USER:PASSWORD
-    Basic authentication, for an exporter behind an authenticating proxy
+    Basic authentication on the command line. Other users of the host can read command lines (ps,
+    /proc): prefer --authorization-file or CHECK_ROS_DIAGNOSTICS_AUTH
  --ca-file=FILE
     CA certificates to verify an https exporter with (default: the system's)
  --insecure
     Do not verify the https exporter's certificate
+ --client-cert=FILE
+    Client certificate (PEM) for an exporter that requires one (mutual TLS); FILE may hold the key too
+ --client-key=FILE
+    The client certificate's key, when it is in a file of its own
  -t, --timeout=SECONDS
     Give up after SECONDS, with UNKNOWN (default: 10)
  -v, --verbose
@@ -94,10 +111,15 @@ LONG_OPTIONS = {
     "--stale-state": True,
     "--perfdata-values": False,
     "--authorization": True,
+    "--authorization-file": True,
     "--ca-file": True,
     "--insecure": False,
+    "--client-cert": True,
+    "--client-key": True,
     "--timeout": True,
     "--verbose": False,
+    "--ros-master": True,
+    "--ros-topic": True,
 }
 _SHORT_OPTIONS = {
     "-h": "--help",
@@ -116,7 +138,7 @@ _STALE_STATES = {"unknown": UNKNOWN, "warning": WARNING, "critical": CRITICAL}
 class Options:
     """What the command line asks for."""
 
-    __slots__ = ("authorization", "ca_file", "insecure", "robot", "settings", "timeout", "url")
+    __slots__ = ("authorization", "robot", "ros_master", "ros_topic", "settings", "timeout", "tls", "url")
 
     def __init__(
         self,
@@ -125,17 +147,19 @@ class Options:
         settings: Settings,
         timeout: float,
         authorization: str,
-        ca_file: str,
-        insecure: bool,
+        tls: Tls,
+        ros_master: str = "",
+        ros_topic: str = "diagnostics_agg",
     ) -> None:
-        """Keep the fields; `url` is the exporter's base URL without a trailing '/'."""
+        """Keep the fields; `url` is the exporter's base URL without a trailing '/', '' with `ros_master`."""
         self.url = url
         self.robot = robot
         self.settings = settings
         self.timeout = timeout
         self.authorization = authorization
-        self.ca_file = ca_file
-        self.insecure = insecure
+        self.tls = tls
+        self.ros_master = ros_master
+        self.ros_topic = ros_topic
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -219,15 +243,51 @@ def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
         perfdata_values="--perfdata-values" in flags,
         verbosity=verbosity,
     )
+    ros_master = flags.get("--ros-master", "")
+    if ros_master and ("--url" in flags or "--hostname" in flags or "--port" in flags):
+        raise CheckError("give either --ros-master or the exporter's address (--url, -H/-p), not both")
+    ros_topic = flags.get("--ros-topic", "diagnostics_agg")
+    if ros_topic not in ("diagnostics_agg", "diagnostics"):
+        raise CheckError(f"invalid --ros-topic {ros_topic!r}: use diagnostics_agg or diagnostics")
     return Options(
-        url=exporter_url(flags),
+        url="" if ros_master else exporter_url(flags),
         robot=robot,
         settings=settings,
         timeout=seconds(flags.get("--timeout", "10")),
-        authorization=flags.get("--authorization", ""),
-        ca_file=flags.get("--ca-file", ""),
-        insecure="--insecure" in flags,
+        authorization=credentials(flags),
+        tls=Tls(
+            ca_file=flags.get("--ca-file", ""),
+            insecure="--insecure" in flags,
+            client_cert=flags.get("--client-cert", ""),
+            client_key=flags.get("--client-key", ""),
+        ),
+        ros_master=ros_master,
+        ros_topic=ros_topic,
     )
+
+
+def credentials(flags: dict[str, str]) -> str:
+    """`user:password` for basic auth from --authorization-file, -a or the environment; '' for none."""
+    path = flags.get("--authorization-file", "")
+    given = flags.get("--authorization", "")
+    if path and given:
+        raise CheckError("give either --authorization-file or -a/--authorization, not both")
+    if path:
+        source = f"--authorization-file {path!r}"
+        try:
+            with open(path, encoding="utf-8") as file:
+                text = file.readline().rstrip("\r\n")
+        except OSError as error:
+            raise CheckError(f"cannot read {source}: {error.strerror}") from None
+        except UnicodeDecodeError:
+            raise CheckError(f"cannot read {source}: not UTF-8 text") from None
+    elif given:
+        source, text = "-a/--authorization", given
+    else:
+        source, text = AUTH_VARIABLE, os.environ.get(AUTH_VARIABLE, "")
+    if text and ":" not in text:
+        raise CheckError(f"{source}: expected USER:PASSWORD")  # never echo what may be a password
+    return text
 
 
 def exporter_url(flags: dict[str, str]) -> str:
@@ -279,9 +339,11 @@ def seconds(text: str) -> float:
 
 
 def check(options: Options) -> tuple[int, str]:
-    """Read the robot from the exporter and judge it."""
+    """Read the robot from the exporter (or straight from its ROS 1 master) and judge it."""
+    if options.ros_master:
+        return judge(robot_from_document(read_from_master(options)), options.settings)
     url = f"{options.url}/api/v1/robots/{quote_path(options.robot)}"
-    answer = get(url, options.timeout, options.authorization, options.ca_file, options.insecure)
+    answer = get(url, options.timeout, options.authorization, options.tls)
     check_status(answer, url, options)
     try:
         document = check_json.loads(answer.body)
@@ -295,6 +357,18 @@ def check(options: Options) -> tuple[int, str]:
     if options.settings.verbosity > 1:
         text += f"\nRead {url} (HTTP {answer.status}, {len(answer.body)} bytes)"
     return state, text
+
+
+def read_from_master(options: Options) -> dict[str, object]:
+    """The robot's API document built from one message read directly from its ROS 1 master."""
+    from overseer.ros1_direct import Ros1DirectError, read_robot_document  # only this mode pays for it
+
+    try:
+        return read_robot_document(
+            options.ros_master, options.robot, options.timeout, topic=options.ros_topic
+        )
+    except Ros1DirectError as error:
+        raise CheckError(str(error)) from None
 
 
 def check_status(answer: Answer, url: str, options: Options) -> None:

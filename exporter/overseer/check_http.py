@@ -4,7 +4,8 @@
 starting Python; the exporter's API needs one GET and a body, so HTTP/1.0 over a socket does it (an
 HTTP/1.0 request gets neither chunked encoding nor keep-alive). Even `socket.py` costs a sixth of
 Python's start-up in enums and selectors, so plain http uses the `_socket` C module it wraps;
-`socket`, `ssl` and `binascii` are imported only when https or credentials need them.
+`socket`, `ssl` and `binascii` are imported only when https or credentials need them. Credentials
+come from a file or the environment (see check.py); they are sent, never printed.
 """
 
 import _socket
@@ -27,6 +28,21 @@ class Answer:
         self.status = status
         self.reason = reason
         self.body = body
+
+
+class Tls:
+    """How to talk TLS: the CA to verify the exporter with (or `insecure`), a client certificate and key."""
+
+    __slots__ = ("ca_file", "client_cert", "client_key", "insecure")
+
+    def __init__(
+        self, ca_file: str = "", insecure: bool = False, client_cert: str = "", client_key: str = ""
+    ) -> None:
+        """Keep the fields; empty strings mean the system's CAs and no client certificate."""
+        self.ca_file = ca_file
+        self.insecure = insecure
+        self.client_cert = client_cert
+        self.client_key = client_key
 
 
 class Url:
@@ -78,9 +94,7 @@ def quote_path(text: str) -> str:
     return "".join(chr(byte) if byte in _UNRESERVED else f"%{byte:02X}" for byte in text.encode("utf-8"))
 
 
-def get(
-    url: str, timeout: float, authorization: str = "", ca_file: str = "", insecure: bool = False
-) -> Answer:
+def get(url: str, timeout: float, authorization: str = "", tls: Tls | None = None) -> Answer:
     """GET `url` within `timeout` seconds in all; CheckError naming the URL when no HTTP answer comes back.
 
     The deadline bounds connecting, sending and every read; only a DNS lookup that hangs can outlast it.
@@ -88,7 +102,7 @@ def get(
     target = parse_url(url)
     deadline = time.monotonic() + timeout
     try:
-        stream = connect(target, deadline, ca_file, insecure)
+        stream = connect(target, deadline, tls or Tls())
         try:
             stream.sendall(request_bytes(target, authorization))
             return parse_answer(read_all(stream, deadline), url)
@@ -101,6 +115,8 @@ def get(
     except ConnectionRefusedError:
         raise CheckError(f"exporter unreachable at {url}: connection refused") from None
     except OSError as error:
+        if target.tls and type(error).__module__ == "ssl":  # ssl is imported when it can have raised
+            raise CheckError(f"TLS error with {url}: {tls_reason(error)}") from None
         raise CheckError(f"exporter unreachable at {url}: {error.strerror or error}") from None
 
 
@@ -112,7 +128,16 @@ def remaining(deadline: float) -> float:
     return left
 
 
-def connect(target: Url, deadline: float, ca_file: str, insecure: bool) -> _socket.socket:
+def tls_reason(error: OSError) -> str:
+    """What went wrong in TLS, without OpenSSL's source locations: `certificate verify failed: ...`."""
+    verify_message = getattr(error, "verify_message", "")
+    if verify_message:
+        return f"certificate verify failed: {verify_message}"
+    reason = getattr(error, "reason", "")
+    return str(reason).lower().replace("_", " ") if reason else str(error)
+
+
+def connect(target: Url, deadline: float, tls: Tls) -> _socket.socket:
     """A connection to the first of `target`'s addresses that accepts one, inside TLS for https."""
     # An ASCII host goes to getaddrinfo as bytes, which spares importing the IDNA codec.
     host = target.host.encode("ascii") if target.host.isascii() else target.host
@@ -126,24 +151,35 @@ def connect(target: Url, deadline: float, ca_file: str, insecure: bool) -> _sock
             sock.close()
             error = refused
             continue
-        return wrap_tls(sock, target.host, deadline, ca_file, insecure) if target.tls else sock
+        return wrap_tls(sock, target.host, deadline, tls) if target.tls else sock
     raise error
 
 
-def wrap_tls(
-    sock: _socket.socket, host: str, deadline: float, ca_file: str, insecure: bool
-) -> _socket.socket:
-    """`sock` inside TLS after a handshake before `deadline`, verifying the certificate unless `insecure`."""
+def wrap_tls(sock: _socket.socket, host: str, deadline: float, tls: Tls) -> _socket.socket:
+    """`sock` inside TLS after a handshake before `deadline`, verifying the certificate unless insecure."""
     import socket  # only https pays for these
     import ssl
 
-    context = ssl.create_default_context(cafile=ca_file or None)
-    if insecure:
+    try:
+        context = ssl.create_default_context(cafile=tls.ca_file or None)
+    except OSError as error:
+        raise CheckError(f"cannot use --ca-file {tls.ca_file!r}: {file_error(error)}") from None
+    if tls.client_cert:
+        try:
+            context.load_cert_chain(tls.client_cert, tls.client_key or None)
+        except OSError as error:
+            raise CheckError(f"cannot use --client-cert {tls.client_cert!r}: {file_error(error)}") from None
+    if tls.insecure:
         context.check_hostname = False
         context.verify_mode = ssl.CERT_NONE
     plain = socket.socket(fileno=sock.detach())
     plain.settimeout(remaining(deadline))
     return context.wrap_socket(plain, server_hostname=host)
+
+
+def file_error(error: OSError) -> str:
+    """Why a certificate, key or CA file could not be used."""
+    return error.strerror or str(getattr(error, "reason", "") or error)
 
 
 def request_bytes(target: Url, credentials: str) -> bytes:

@@ -77,6 +77,12 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help=f"address to serve on (default :{DEFAULT_PORT})",
     )
     parser.add_argument(
+        "--web.config.file",
+        dest="web_config_file",
+        metavar="PATH",
+        help="exporter-toolkit web config: TLS, client certificates, basic auth (default: plain HTTP)",
+    )
+    parser.add_argument(
         "--dds.domain",
         dest="domains",
         type=int,
@@ -155,6 +161,8 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
     overrides: dict[str, Any] = {}
     if args.listen_address is not None:
         overrides["web.listen_address"] = args.listen_address
+    if args.web_config_file is not None:
+        overrides["web.config_file"] = args.web_config_file
     if args.domains:
         overrides["dds.domains"] = list(args.domains)
     if args.loopback_only:

@@ -76,9 +76,10 @@ class Ros1Config:
 
 @dataclass(frozen=True)
 class WebConfig:
-    """The HTTP endpoint."""
+    """The HTTP endpoint; `config_file` is an exporter-toolkit web config (TLS, basic auth)."""
 
     listen_address: str = f":{DEFAULT_PORT}"
+    config_file: str | None = None
 
     @property
     def host_and_port(self) -> tuple[str, int]:
@@ -121,7 +122,7 @@ def parse_duration(value: object, key: str) -> float:
     if isinstance(value, bool):
         raise ConfigError(f"{key}: expected a duration such as 5s, got {value!r}")
     if isinstance(value, int | float):
-        seconds = float(value)
+        seconds = float(value) if abs(value) < 1e300 else float("inf")  # float(10**400) would raise
     elif isinstance(value, str) and value and _DURATION_PART.sub("", value) == "":
         seconds = sum(float(n) * _DURATION_UNITS[u] for n, u in _DURATION_PART.findall(value))
     else:
@@ -157,7 +158,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
             raise ConfigError(f"config.file: cannot read {str(path)!r}: {error.strerror}") from None
         try:
             loaded = yaml.safe_load(text)
-        except yaml.YAMLError as error:
+        except (yaml.YAMLError, ValueError, RecursionError) as error:  # also huge integers, deep nesting
             raise ConfigError(f"config.file: {str(path)!r} is not valid YAML: {_first_line(error)}") from None
         if loaded is not None and not isinstance(loaded, dict):
             raise ConfigError(f"config.file: expected a mapping at the top of {str(path)!r}")
@@ -174,7 +175,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
     _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level"})
-    web = _section(raw, "web", {"listen_address"})
+    web = _section(raw, "web", {"listen_address", "config_file"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
     fleet = _section(raw, "fleet", {f.name for f in fields(FleetLimits)})
@@ -185,6 +186,10 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         address = _string(web["listen_address"], "web.listen_address")
         parse_listen_address(address)
         config = replace(config, web=WebConfig(address))
+    if web.get("config_file") is not None:
+        config = replace(
+            config, web=replace(config.web, config_file=_string(web["config_file"], "web.config_file"))
+        )
     config = replace(
         config,
         dds=_dds_config(dds),
@@ -243,6 +248,10 @@ def _ros1_config(raw: dict[str, Any]) -> Ros1Config:
     names = [robot.name for robot in robots]
     if len(set(names)) != len(names):
         raise ConfigError(f"ros1.robots: robot names must be unique, got {names}")
+    masters = [robot.master_uri.rstrip("/") for robot in robots]
+    if len(set(masters)) != len(masters):
+        # Two subscriptions with one caller id on one master keep shutting each other down.
+        raise ConfigError(f"ros1.robots: each robot needs a master of its own, got {masters}")
     values: dict[str, Any] = {}
     for key in ("reconnect_min", "reconnect_max", "poll_interval"):
         if key in raw:
@@ -337,7 +346,8 @@ def _section(raw: dict[str, Any], name: str, allowed: set[str]) -> dict[str, Any
 def _reject_unknown(raw: dict[str, Any], prefix: str, allowed: set[str]) -> None:
     for key in raw:
         if key not in allowed:
-            raise ConfigError(f"{prefix}{key}: unknown key (expected one of {', '.join(sorted(allowed))})")
+            shown = key if isinstance(key, str) and key.isprintable() and key else repr(key)
+            raise ConfigError(f"{prefix}{shown}: unknown key (expected one of {', '.join(sorted(allowed))})")
 
 
 def _string(value: object, key: str) -> str:

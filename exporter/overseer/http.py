@@ -1,15 +1,27 @@
-"""The HTTP endpoint: /metrics, /api/v1, /-/healthy and the status page, on a bounded thread pool."""
+"""The HTTP endpoint: /metrics, /api/v1, /-/healthy and the status page, bounded against slow or many clients.
+
+A thread per connection, at most `MAX_CONNECTIONS` of them (more are closed at once), of which at most
+`MAX_CONCURRENT_REQUESTS` build an answer at a time. Reading a request, and writing an answer, must each
+end within `REQUEST_TIMEOUT_SECONDS` in all, not per byte, so a client trickling bytes is cut off. The TLS
+handshake, when the web config asks for TLS, runs in the connection's thread under the same deadline, so
+a slow TLS client never blocks the accept loop. Basic auth, when configured, guards every path.
+"""
 
 from __future__ import annotations
 
 import gzip
+import io
 import json
 import logging
+import select
 import socket
+import ssl
+import sys
 import threading
+import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import unquote, urlsplit
 
 from prometheus_client.exposition import choose_encoder
@@ -19,18 +31,29 @@ from overseer.api import robot_document, robots_document
 from overseer.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
 from overseer.exposition import FleetExposition
 from overseer.model import FleetModel
+from overseer.web_config import REALM, WebSecurity
+
+if TYPE_CHECKING:
+    from _typeshed import ReadableBuffer, WriteableBuffer
 
 log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
+MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
 REQUEST_TIMEOUT_SECONDS = 10.0
+_TLS_HANDSHAKE_RECORD = b"\x16"
+_NOT_TLS_ANSWER = (
+    b"HTTP/1.0 400 Bad Request\r\nContent-Type: text/plain; charset=utf-8\r\nConnection: close\r\n\r\n"
+    b"Client sent an HTTP request to an HTTPS server.\n"
+)
 
 
 class OverseerServer(ThreadingHTTPServer):
     """A threading HTTP server that serves one fleet model and one registry."""
 
     daemon_threads = True
+    block_on_close = False  # stopping never waits for a slow client
     request_queue_size = 64
 
     def __init__(
@@ -39,6 +62,7 @@ class OverseerServer(ThreadingHTTPServer):
         model: FleetModel,
         registry: CollectorRegistry,
         exposition: FleetExposition,
+        security: WebSecurity | None = None,
     ) -> None:
         """Bind to `address` ('' host for every interface; IPv6 when the host has a colon)."""
         if ":" in address[0]:
@@ -46,6 +70,8 @@ class OverseerServer(ThreadingHTTPServer):
         self.model = model
         self.registry = registry
         self.exposition = exposition
+        self.security = security or WebSecurity()
+        self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
         self.status_page = resources.files("overseer.web").joinpath("index.html").read_bytes()
         super().__init__(address, _Handler)
@@ -55,26 +81,164 @@ class OverseerServer(ThreadingHTTPServer):
         """The base URL the server answers on."""
         host, port = self.server_address[:2]
         shown = "127.0.0.1" if host in ("", "0.0.0.0") else str(host)
-        return f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
+        scheme = "https" if self.security.tls is not None else "http"
+        return f"{scheme}://{'[' + shown + ']' if ':' in shown else shown}:{port}"
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        """Hand the connection to a thread of its own, or close it when `MAX_CONNECTIONS` are open."""
+        if not self.connections.acquire(blocking=False):
+            log.debug("closing a connection from %s: %d connections open", client_address, MAX_CONNECTIONS)
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self.connections.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        """Serve one connection in its thread, then free its place."""
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self.connections.release()
+
+    def finish_request(self, request: Any, client_address: Any) -> None:
+        """Serve one connection, inside TLS when the web config asks for it."""
+        context = self.security.tls
+        if context is None:
+            _Handler(request, client_address, self)
+            return
+        connection = _accept_tls(context, request, client_address)
+        if connection is not None:
+            try:
+                _Handler(connection, client_address, self)
+            finally:
+                connection.close()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """Log a connection's failure: one debug line when the client went away, a traceback otherwise."""
+        error = sys.exc_info()[1]
+        if isinstance(error, ConnectionError | TimeoutError | ssl.SSLError):
+            log.debug("connection from %s ended: %s", client_address, error)
+        else:
+            log.exception("error serving %s", client_address)
+
+
+def _accept_tls(context: ssl.SSLContext, sock: socket.socket, client: Any) -> ssl.SSLSocket | None:
+    """`sock` inside TLS once the handshake completes within the deadline; None when it does not.
+
+    A client speaking plain HTTP gets a plain 400 saying so, as Go's servers answer, and is closed.
+    """
+    deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
+    try:
+        sock.settimeout(REQUEST_TIMEOUT_SECONDS)
+        first = sock.recv(1, socket.MSG_PEEK)
+        if first != _TLS_HANDSHAKE_RECORD:
+            if first:
+                sock.sendall(_NOT_TLS_ANSWER)
+            log.debug("closing a connection from %s that does not speak TLS", client)
+            return None
+        connection = context.wrap_socket(sock, server_side=True, do_handshake_on_connect=False)
+    except OSError as error:
+        log.debug("connection from %s ended before TLS: %s", client, error)
+        return None
+    try:
+        connection.setblocking(False)
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                connection.do_handshake()
+                break
+            except ssl.SSLWantReadError:
+                ready = select.select([connection], [], [], max(left, 0))[0]
+            except ssl.SSLWantWriteError:
+                ready = select.select([], [connection], [], max(left, 0))[1]
+            if not ready:
+                raise TimeoutError("TLS handshake not completed in time")
+        connection.settimeout(REQUEST_TIMEOUT_SECONDS)
+        return connection
+    except OSError as error:  # ssl.SSLError and TimeoutError are ones
+        log.debug("TLS handshake with %s failed: %s", client, error)
+        connection.close()
+        return None
+
+
+class _TimedStream(io.RawIOBase):
+    """A connection as a raw stream whose reads and writes must all be done by `deadline` (monotonic).
+
+    A socket timeout bounds each read or write alone; this bounds their sum, so a client that sends or
+    takes one byte at a time cannot hold a thread for longer than the deadline.
+    """
+
+    def __init__(self, sock: socket.socket) -> None:
+        """Read from and write to `sock`; the deadline is set per request."""
+        self._sock = sock
+        self.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
+
+    def readable(self) -> bool:
+        """It can be read."""
+        return True
+
+    def writable(self) -> bool:
+        """It can be written."""
+        return True
+
+    def readinto(self, buffer: WriteableBuffer) -> int:
+        """Read what arrives before the deadline into `buffer`."""
+        self._sock.settimeout(self._left())
+        return self._sock.recv_into(buffer)
+
+    def write(self, data: ReadableBuffer) -> int:
+        """Send all of `data` before the deadline."""
+        view = memoryview(data).cast("B")
+        while view:
+            self._sock.settimeout(self._left())
+            view = view[self._sock.send(view[:65536]) :]
+        return len(memoryview(data).cast("B"))
+
+    def _left(self) -> float:
+        left = self.deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("request or answer not transferred in time")
+        return left
 
 
 class _Handler(BaseHTTPRequestHandler):
     server: OverseerServer
-    timeout = REQUEST_TIMEOUT_SECONDS
     protocol_version = "HTTP/1.1"
     server_version = "overseer"
+    _stream: _TimedStream
+
+    def setup(self) -> None:
+        self.connection = self.request
+        self._stream = _TimedStream(self.connection)
+        self.rfile = io.BufferedReader(self._stream)
+        self.wfile = self._stream  # type: ignore[assignment]  # unbuffered, as StreamRequestHandler's
+
+    def handle_one_request(self) -> None:
+        self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
+        super().handle_one_request()
 
     def do_GET(self) -> None:
-        if not self.server.slots.acquire(timeout=REQUEST_TIMEOUT_SECONDS):
-            self._send(503, b"too many concurrent requests\n", "text/plain; charset=utf-8")
-            return
-        try:
-            self._route(head_only=False)
-        finally:
-            self.server.slots.release()
+        self._serve(head_only=False)
 
     def do_HEAD(self) -> None:
-        self._route(head_only=True)
+        self._serve(head_only=True)
+
+    def _serve(self, head_only: bool) -> None:
+        if not self.server.slots.acquire(timeout=REQUEST_TIMEOUT_SECONDS):
+            self._send(503, b"too many concurrent requests\n", "text/plain; charset=utf-8", head_only)
+            return
+        try:
+            if self.server.security.authorized(self.headers.get("Authorization")):
+                self._route(head_only)
+            else:
+                log.debug("basic auth refused for %s", self.address_string())
+                challenge = ("WWW-Authenticate", f'Basic realm="{REALM}"')
+                self._send(401, b"Unauthorized\n", "text/plain; charset=utf-8", head_only, extra=(challenge,))
+        finally:
+            self.server.slots.release()
 
     def _route(self, head_only: bool) -> None:
         path = urlsplit(self.path).path
@@ -113,8 +277,15 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(status, body, "application/json; charset=utf-8", head_only, compressible=True)
 
     def _send(
-        self, status: int, body: bytes, content_type: str, head_only: bool = False, compressible: bool = False
+        self,
+        status: int,
+        body: bytes,
+        content_type: str,
+        head_only: bool = False,
+        compressible: bool = False,
+        extra: tuple[tuple[str, str], ...] = (),
     ) -> None:
+        self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
         if compressible and "gzip" in self.headers.get("Accept-Encoding", ""):
             body = gzip.compress(body, compresslevel=1)
             encoding: str | None = "gzip"
@@ -126,9 +297,16 @@ class _Handler(BaseHTTPRequestHandler):
         if encoding:
             self.send_header("Content-Encoding", encoding)
         self.send_header("Cache-Control", "no-store")
+        for name, value in extra:
+            self.send_header(name, value)
         self.end_headers()
         if not head_only:
             self.wfile.write(body)
+
+    def end_headers(self) -> None:
+        for name, value in self.server.security.headers:
+            self.send_header(name, value)
+        super().end_headers()
 
     def log_message(self, format: str, *args: Any) -> None:
         log.debug("%s %s", self.address_string(), format % args)

@@ -1,0 +1,71 @@
+"""A network namespace joined to the host by a veth pair, for cutting one robot's link (needs root).
+
+Addresses are private /30s in 10.213.0.0/16, configured only on the pair, so nothing leaves the
+machine. The namespace, and with it both ends of the pair, is deleted when the block ends.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import subprocess
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+_counter = itertools.count(1)
+
+
+def ip(*args: str) -> None:
+    """Run `ip` with `args`, failing with its message."""
+    result = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+    if result.returncode != 0:
+        raise RuntimeError(f"ip {' '.join(args)}: {result.stderr.strip()}")
+
+
+@dataclass(frozen=True)
+class VethNamespace:
+    """A namespace `name` whose interface `inside` (`inside_address`) pairs with `outside` on the host."""
+
+    name: str
+    outside: str
+    inside: str
+    outside_address: str
+    inside_address: str
+
+    def command(self, args: Sequence[str]) -> list[str]:
+        """`args` as a command that runs inside the namespace."""
+        return ["ip", "netns", "exec", self.name, *args]
+
+    def cut(self) -> None:
+        """Take the link down: nothing passes either way."""
+        ip("link", "set", self.outside, "down")
+
+    def restore(self) -> None:
+        """Bring the link back up (its addresses and routes come back with it)."""
+        ip("link", "set", self.outside, "up")
+
+
+@contextmanager
+def veth_namespace() -> Iterator[VethNamespace]:
+    """A fresh namespace with a veth pair to the host, both ends up and addressed; always removed."""
+    number = next(_counter)
+    tag = f"{os.getpid() % 100_000}{number}"
+    subnet = (os.getpid() * 7 + number) % 250 + 1
+    namespace = VethNamespace(
+        f"overseer-test-{tag}", f"ovs{tag}h", f"ovs{tag}n", f"10.213.{subnet}.1", f"10.213.{subnet}.2"
+    )
+    ip("netns", "add", namespace.name)
+    try:
+        ip("link", "add", namespace.outside, "type", "veth", "peer", "name", namespace.inside)
+        ip("link", "set", namespace.inside, "netns", namespace.name)
+        ip("addr", "add", f"{namespace.outside_address}/30", "dev", namespace.outside)
+        ip("link", "set", namespace.outside, "up")
+        inside = ("-n", namespace.name)
+        ip(*inside, "addr", "add", f"{namespace.inside_address}/30", "dev", namespace.inside)
+        ip(*inside, "link", "set", namespace.inside, "up")
+        ip(*inside, "link", "set", "lo", "up")
+        yield namespace
+    finally:
+        subprocess.run(["ip", "link", "del", namespace.outside], capture_output=True, timeout=30)
+        ip("netns", "del", namespace.name)
