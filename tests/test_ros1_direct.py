@@ -17,6 +17,7 @@ from overseer.ros1_direct import (
     NoPublisherError,
     read_robot_document,
 )
+from support.nagios import run_check
 from support.ports import free_port
 from support.processes import running_exporter, wait_for
 from support.ros1 import fake_publisher, frame, kill, running_master, running_publisher, start_publisher
@@ -128,3 +129,27 @@ def test_failing_publisher_is_retried_at_most_twice_a_second(tmp_path: Path) -> 
         with pytest.raises(MessageTimeoutError, match="connection closed by the publisher"):
             read_robot_document(master.uri, "r1", timeout=2)
         assert 1 <= fake.connections <= 5
+
+
+def test_check_with_ros_master_prints_what_the_exporter_mode_prints(tmp_path: Path, dds_domain: int) -> None:
+    with (
+        running_master(tmp_path) as master,
+        running_publisher(tmp_path, master, "aggregator", STATUSES),
+        running_exporter(tmp_path, dds_domain, f"--ros1.robot=ros1a={master.uri.rstrip('/')}") as exporter,
+    ):
+        wait_for(lambda: (r := exporter.robot("ros1a")) and r["up"], 30, message="ros1a up")
+        for extra in ([], ["-n", "temp"], ["--perfdata-values", "-v"]):
+            via_exporter = run_check("--url", exporter.url, "-r", "ros1a", *extra)
+            direct = run_check("--ros-master", master.uri, "-r", "ros1a", "-t", "10", *extra)
+            assert direct == via_exporter
+    assert via_exporter.state == 2
+    assert direct.output.startswith("CRITICAL - ros1a: /Laser (No scans)")
+
+
+def test_check_with_unreachable_ros_master_is_one_unknown_line() -> None:
+    uri = f"http://127.0.0.1:{free_port()}"
+    result = run_check("--ros-master", uri, "-r", "ros1a", "-t", "3")
+    assert result.state == 3
+    assert (
+        result.output == f"UNKNOWN - ROS master unreachable at {uri}: {uri} unreachable: connection refused\n"
+    )
