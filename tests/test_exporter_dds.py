@@ -6,8 +6,6 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from prometheus_client.parser import text_string_to_metric_families
-
 from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
 from support.ports import fresh_domain_id
@@ -18,15 +16,6 @@ FAST = ("--fleet.stale-after=1s", "--fleet.robot-timeout=2s")
 
 def levels_by_component(robot: dict[str, Any]) -> dict[str, str]:
     return {c["name"]: c["state"] for c in robot["components"]}
-
-
-def scrape(exporter: Exporter) -> dict[str, dict[tuple[tuple[str, str], ...], float]]:
-    """Samples of /metrics by metric name, keyed by their sorted labels."""
-    result: dict[str, dict[tuple[tuple[str, str], ...], float]] = {}
-    for family in text_string_to_metric_families(exporter.get("/metrics").decode()):
-        for sample in family.samples:
-            result.setdefault(sample.name, {})[tuple(sorted(sample.labels.items()))] = sample.value
-    return result
 
 
 def robot_with(exporter: Exporter, name: str, components: int) -> dict[str, Any] | None:
@@ -50,7 +39,7 @@ def test_exporter_shows_every_robot_and_component_with_exact_levels(tmp_path: Pa
             )
             assert levels_by_component(robot) == expected
             assert robot["state"] == "ERROR"
-        samples = scrape(exporter)
+        samples = exporter.samples()
         for name in ("robot1", "robot2", "robot3"):
             assert samples["ros_diagnostics_robot_up"][(("robot", name),)] == 1
             assert samples["ros_diagnostics_robot_level"][(("robot", name),)] == 2
@@ -120,7 +109,7 @@ def test_stopped_robot_goes_down_then_its_series_expire(tmp_path: Path, dds_doma
         )
         assert robot["state"] == "STALE"
         assert set(levels_by_component(robot).values()) == {"STALE"}
-        assert scrape(exporter)["ros_diagnostics_robot_up"][(("robot", "robot2"),)] == 0
+        assert exporter.samples()["ros_diagnostics_robot_up"][(("robot", "robot2"),)] == 0
         wait_for(
             lambda: 'robot="robot2"' not in exporter.get("/metrics").decode(), 30, message="robot2 expired"
         )
@@ -150,9 +139,9 @@ def test_level_change_on_the_robot_reaches_metrics(tmp_path: Path, dds_domain: i
         ),
     ):
         wait_for(
-            lambda: scrape(exporter)["ros_diagnostics_level"].get(battery) == 2, 30, message="battery ERROR"
+            lambda: exporter.samples()["ros_diagnostics_level"].get(battery) == 2, 30, message="battery ERROR"
         )
-        samples = scrape(exporter)
+        samples = exporter.samples()
         assert samples["ros_diagnostics_level_changes_total"][battery] == 1
         assert samples["ros_diagnostics_value"][(*battery[:2], ("key", "percentage"), battery[2])] == 4.0
 
@@ -245,10 +234,10 @@ def test_varying_values_reach_the_exporter(tmp_path: Path, dds_domain: int) -> N
         running_simulator(tmp_path, dds_domain, "--robots=1", "--rate=5", "--vary-values"),
     ):
         first = wait_for(
-            lambda: scrape(exporter)["ros_diagnostics_value"].get(voltage), 30, message="voltage"
+            lambda: exporter.samples()["ros_diagnostics_value"].get(voltage), 30, message="voltage"
         )
         second = wait_for(
-            lambda: (v := scrape(exporter)["ros_diagnostics_value"][voltage]) != first and v,
+            lambda: (v := exporter.samples()["ros_diagnostics_value"][voltage]) != first and v,
             30,
             message="new voltage",
         )

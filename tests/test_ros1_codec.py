@@ -14,6 +14,7 @@ from rosbags.typesys import Stores, get_typestore
 from overseer.codec import DecodeError
 from overseer.codec.ros1 import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from support import strategies
 from support.ros1 import genpy
 
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
@@ -226,22 +227,7 @@ def test_corrupted_payloads_raise_only_decode_error(noise: bytes, offset: int) -
         decode_diagnostic_array(bytes(payload))
 
 
-text = st.text(max_size=20)
-statuses = st.builds(
-    DiagnosticStatus,
-    st.integers(min_value=0, max_value=255),
-    text,
-    text,
-    text,
-    st.lists(st.tuples(text, text), max_size=3).map(tuple),
-)
-arrays = st.builds(
-    DiagnosticArray,
-    st.integers(min_value=0, max_value=2**32 - 1),
-    st.integers(min_value=0, max_value=2**32 - 1),
-    text,
-    st.lists(statuses, max_size=5).map(tuple),
-)
+arrays = strategies.arrays(st.integers(min_value=0, max_value=2**32 - 1))
 
 
 @settings(max_examples=200, deadline=None)

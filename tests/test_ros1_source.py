@@ -16,7 +16,6 @@ from typing import Any
 
 import pytest
 import yaml
-from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.api import robot_document
 from overseer.codec.ros1 import encode_diagnostic_array
@@ -310,15 +309,6 @@ def test_fake_publisher_of_another_type_is_a_handshake_error(tmp_path: Path) -> 
 # --- the exporter, end to end -----------------------------------------------------------------
 
 
-def scrape(exporter: Exporter) -> dict[str, dict[tuple[tuple[str, str], ...], float]]:
-    """Samples of /metrics by metric name, keyed by their sorted labels."""
-    result: dict[str, dict[tuple[tuple[str, str], ...], float]] = {}
-    for family in text_string_to_metric_families(exporter.get("/metrics").decode()):
-        for sample in family.samples:
-            result.setdefault(sample.name, {})[tuple(sorted(sample.labels.items()))] = sample.value
-    return result
-
-
 def states(robot: dict[str, Any]) -> dict[str, str]:
     return {c["name"]: c["state"] for c in robot["components"]}
 
@@ -379,7 +369,7 @@ def test_exporter_shows_two_ros1_robots_next_to_a_ros2_robot_from_one_config_fil
                 {"/Laser": "ERROR", "/Power": "OK"},
             )
             assert robot1["transport"] == "dds"
-            samples = scrape(exporter)
+            samples = exporter.samples()
             for name in ("ros1a", "ros1b", "robot1"):
                 assert samples["ros_diagnostics_robot_up"][(("robot", name),)] == 1
             assert samples["ros_diagnostics_robot_level"][(("robot", "ros1b"),)] == 2
@@ -471,7 +461,7 @@ def test_fake_publisher_garbled_and_lying_frames_are_counted_and_the_exporter_ke
         wait_for(lambda: fake.connections >= 4, 30, message="reconnections")
         decode_errors = ("overseer_messages_total", (("result", "decode_error"), ("transport", "ros1")))
         wait_for(
-            lambda: scrape(exporter)[decode_errors[0]][decode_errors[1]] >= 1, 10, message="decode errors"
+            lambda: exporter.samples()[decode_errors[0]][decode_errors[1]] >= 1, 10, message="decode errors"
         )
         assert exporter.get("/-/healthy")
         fake_robot = wait_for(lambda: robot_up(exporter, "fake"), 10, message="the fake robot up")

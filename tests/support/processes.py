@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+from prometheus_client.parser import text_string_to_metric_families
+
 from support.ports import free_port
 
 VENV_BIN = Path(sys.executable).parent
@@ -66,6 +68,14 @@ class Exporter(RunningProcess):
     def get_json(self, path: str) -> Any:
         """GET `path` parsed as JSON."""
         return json.loads(self.get(path))
+
+    def samples(self) -> dict[str, dict[tuple[tuple[str, str], ...], float]]:
+        """The samples of /metrics by metric name, keyed by their sorted labels."""
+        result: dict[str, dict[tuple[tuple[str, str], ...], float]] = {}
+        for family in text_string_to_metric_families(self.get("/metrics").decode()):
+            for sample in family.samples:
+                result.setdefault(sample.name, {})[tuple(sorted(sample.labels.items()))] = sample.value
+        return result
 
     def robot(self, name: str) -> dict[str, Any] | None:
         """The API's view of one robot, or None while it is unknown."""
