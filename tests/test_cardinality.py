@@ -18,7 +18,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support.dds_writer import raw_diagnostics_writer
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 
-COMPONENT_CAP, NEW_PER_MESSAGE, MESSAGES, RATE_HZ = 1000, 5, 3000, 150.0
+COMPONENT_CAP, NEW_PER_MESSAGE, MESSAGES, RATE_HZ = 1000, 5, 1500, 75.0
 ROBOT_CAP, ROBOTS = 100, 1000
 FLAT_MEMORY_BYTES = 4 * 1024 * 1024
 
