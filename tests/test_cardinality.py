@@ -70,6 +70,7 @@ def test_a_new_component_name_in_every_message_hits_the_cap_counted_with_flat_me
         raw_diagnostics_writer(dds_domain, "rt/churn/diagnostics_agg") as writer,
     ):
         wait_for(lambda: exporter.robot("churn"), 30, message="the churning robot discovered")
+        writer.wait_for_reader()
         started = time.monotonic()
         memory_at_cap = 0
         for index in range(MESSAGES):

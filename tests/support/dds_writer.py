@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -21,6 +22,14 @@ class RawDiagnosticsWriter:
     def __init__(self, writer: DataWriter[DiagnosticArray]) -> None:
         """Wrap a Cyclone DDS writer of the ROS 2 DiagnosticArray type."""
         self._writer = writer
+
+    def wait_for_reader(self, timeout: float = 30.0) -> None:
+        """Wait until a reader has matched this writer: what is written before that is lost (volatile)."""
+        deadline = time.monotonic() + timeout
+        while not self._writer.get_matched_subscriptions():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no reader matched the writer within {timeout}s")
+            time.sleep(0.05)
 
     def write(self, payload: bytes) -> int:
         """Write one serialized sample; returns Cyclone's return code (negative when it refused it)."""
