@@ -131,11 +131,8 @@ def _lines_for(
     if cached is not None and cached.revision == robot.revision:
         other_updates = cached.other_updates
     else:
-        other_updates = sorted(
-            component.last_update
-            for key, component in robot.components.items()
-            if key not in robot.message_keys
-        )
+        components = robot.components
+        other_updates = sorted(components[key].last_update for key in robot.missing)
     horizon = snapshot.taken_at - snapshot.limits.stale_after
     message_stale = robot.last_message is None or robot.last_message < horizon
     signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))

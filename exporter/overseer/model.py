@@ -12,12 +12,13 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
+from typing import NamedTuple
 
 from overseer.levels import Level, worst
-from overseer.messages import DiagnosticArray
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 
 ComponentKey = tuple[str, str]  # (name, hardware_id)
 _LEVELS = tuple(Level)  # by wire value, faster than calling the enum
@@ -57,7 +58,13 @@ class Component:
 
 @dataclass(frozen=True, slots=True)
 class RobotState:
-    """One robot as last seen; replaced whole, never mutated."""
+    """One robot as last seen; replaced whole, never mutated.
+
+    `latest` holds, in the message's order, the component each status of the latest message went to,
+    or None where the status lost something (dropped, cut short, or a repeated name): an ingest may
+    then apply only the statuses that changed (`FleetModel.apply_changes`). `missing` holds the
+    components absent from the latest message; it is empty for almost every robot, so it is shared.
+    """
 
     name: str
     transport: str
@@ -65,12 +72,20 @@ class RobotState:
     components: Mapping[ComponentKey, Component]
     discovered_at: float
     revision: int = 0
-    message_keys: frozenset[ComponentKey] = frozenset()  # the components in the latest message
+    latest: tuple[ComponentKey | None, ...] = ()
+    missing: frozenset[ComponentKey] = frozenset()
 
     @property
     def last_seen(self) -> float:
         """When the robot last sent a message, or when it was discovered if it never did."""
         return self.discovered_at if self.last_message is None else self.last_message
+
+
+class Applied(NamedTuple):
+    """What applying one array did: whether nothing was dropped, and the robot's revision after it."""
+
+    complete: bool
+    revision: int | None  # None when the robot was refused (the robot cap)
 
 
 @dataclass(frozen=True)
@@ -94,7 +109,7 @@ class FleetSnapshot:
     @staticmethod
     def last_update(robot: RobotState, key: ComponentKey, component: Component) -> float:
         """When the component was last reported."""
-        if robot.last_message is not None and key in robot.message_keys:
+        if robot.last_message is not None and key not in robot.missing:
             return robot.last_message
         return component.last_update
 
@@ -157,12 +172,18 @@ class FleetModel:
             self._robots[robot] = RobotState(robot, transport, None, MappingProxyType({}), self._clock())
             return True
 
-    def touch(self, robot: str, transport: str) -> bool:
-        """Record a message identical to the robot's last one; False when it must be applied in full."""
+    def touch(self, robot: str, transport: str, revision: int | None = None) -> bool:
+        """Record a message identical to the robot's last one; False when it must be applied in full.
+
+        With `revision`, the robot must still be as that revision left it: anything else that changed
+        it since (a forgotten topic, expired components) asks for a full apply too.
+        """
         now = self._clock()
         with self._lock:
             state = self._robots.get(robot)
             if state is None or state.last_message is None:
+                return False
+            if revision is not None and state.revision != revision:
                 return False
             self._robots[robot] = RobotState(
                 robot,
@@ -171,57 +192,45 @@ class FleetModel:
                 state.components,
                 state.discovered_at,
                 state.revision,
-                state.message_keys,
+                state.latest,
+                state.missing,
             )
             self._message_counts[(transport, "received")] += 1
         return True
 
     def apply(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> bool:
         """Merge one received array into the robot's state; False when anything in it was dropped."""
+        return self.apply_array(robot, array, transport, topic).complete
+
+    def apply_array(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> Applied:
+        """Merge one received array into the robot's state, and tell the revision it made."""
         now = self._clock()
         limits = self.limits
-        max_length = limits.max_string_length
-        truncated = 0
-        prepared: list[tuple[ComponentKey, Level, str, tuple[tuple[str, str], ...]]] = []
-        dropped: Counter[str] = Counter()
-        max_values = limits.max_values_per_component
-        for wire_level, name, message, hardware_id, values in array.statuses:
-            if not 0 <= wire_level <= 3:
-                dropped["invalid_level"] += 1
-                continue
-            if len(name) > max_length or len(hardware_id) > max_length or len(message) > max_length:
-                truncated += (
-                    (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
-                )
-                name, hardware_id, message = name[:max_length], hardware_id[:max_length], message[:max_length]
-            if len(values) > max_values:
-                dropped["value_limit"] += len(values) - max_values
-                values = values[:max_values]
-            for value_key, value_text in values:
-                if len(value_key) > max_length or len(value_text) > max_length:
-                    truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
-                    values = tuple((k[:max_length], v[:max_length]) for k, v in values)
-                    break
-            prepared.append(((name, hardware_id), _LEVELS[wire_level], message, values))
-
+        prepared, dropped, truncated = _prepare(array.statuses, limits)
         with self._lock:
             state = self._robots.get(robot)
             if state is None:
                 if len(self._robots) >= limits.max_robots:
                     self._message_counts[(transport, "dropped")] += 1
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
-                    return False
+                    return Applied(False, None)
                 components: dict[ComponentKey, Component] = {}
                 revision, discovered_at = 0, now
             else:
                 components = dict(state.components)
                 revision, discovered_at = state.revision, state.discovered_at
-            message_keys = set()
-            for key, level, message, values in prepared:
+            latest: list[ComponentKey | None] = []
+            in_message: set[ComponentKey] = set()
+            for entry in prepared:
+                if entry is None:
+                    latest.append(None)
+                    continue
+                key, level, message, values, intact = entry
                 previous = components.get(key)
                 if previous is None:
                     if len(components) >= limits.max_components_per_robot:
                         dropped["component_limit"] += 1
+                        latest.append(None)
                         continue
                     components[key] = _component(key, level, message, values, now, 0, topic)
                 elif (
@@ -232,13 +241,19 @@ class FleetModel:
                 ):
                     changes = previous.level_changes + (previous.level is not level)
                     components[key] = _component(key, level, message, values, now, changes, topic)
-                message_keys.add(key)
+                latest.append(key if intact and key not in in_message else None)
+                in_message.add(key)
             if state is not None and state.last_message is not None:
                 # Components missing from this message keep the time of the last message that had them.
-                for key in state.message_keys.difference(message_keys):
+                for key in state.components.keys() - state.missing - in_message:
                     left = components.get(key)
                     if left is not None:
                         components[key] = replace(left, last_update=state.last_message)
+            missing = (
+                _NONE_MISSING
+                if len(in_message) == len(components)
+                else frozenset(components.keys() - in_message)
+            )
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -246,13 +261,66 @@ class FleetModel:
                 MappingProxyType(components),
                 discovered_at,
                 revision + 1,
-                frozenset(message_keys),
+                tuple(latest),
+                missing,
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
-            result = "dropped" if dropped else "received"
-            self._message_counts[(transport, result)] += 1
-        return not dropped
+            self._message_counts[(transport, "dropped" if dropped else "received")] += 1
+        return Applied(not dropped, revision + 1)
+
+    def apply_changes(
+        self,
+        robot: str,
+        revision: int,
+        changed: list[tuple[int, DiagnosticStatus]],
+        transport: str,
+        topic: str = "",
+    ) -> int | None:
+        """Apply an array equal to the robot's latest but for the statuses `changed` (by position).
+
+        Only when the robot is still at `revision`, its latest message lost nothing, and every changed
+        status kept its component; returns the new revision, or None (nothing done: apply it in full).
+        """
+        now = self._clock()
+        prepared, dropped, truncated = _prepare([status for _, status in changed], self.limits)
+        if dropped or truncated:
+            return None
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is None or state.revision != revision or state.last_message is None:
+                return None
+            latest = state.latest
+            if None in latest:
+                return None
+            merged: list[_Prepared] = []
+            for (index, _), entry in zip(changed, prepared, strict=True):
+                if entry is None or index >= len(latest) or latest[index] != entry[0]:
+                    return None
+                merged.append(entry)
+            components = dict(state.components)
+            for key, level, message, values, _intact in merged:
+                previous = components[key]
+                if (
+                    previous.level is not level
+                    or previous.message != message
+                    or previous.values != values
+                    or previous.topic != topic
+                ):
+                    changes = previous.level_changes + (previous.level is not level)
+                    components[key] = _component(key, level, message, values, now, changes, topic)
+            self._robots[robot] = RobotState(
+                robot,
+                transport,
+                now,
+                MappingProxyType(components),
+                state.discovered_at,
+                revision + 1,
+                latest,
+                state.missing,
+            )
+            self._message_counts[(transport, "received")] += 1
+        return revision + 1
 
     def forget_topic(self, robot: str, topic: str) -> None:
         """Drop the components a robot reported on `topic` (when it turns out to publish a better one)."""
@@ -292,6 +360,47 @@ class FleetModel:
         return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated, errors)
 
 
+_NONE_MISSING: frozenset[ComponentKey] = frozenset()
+
+# A status ready to merge: its component, level, message, values, and whether it arrived whole.
+_Prepared = tuple[ComponentKey, Level, str, tuple[tuple[str, str], ...], bool]
+
+
+def _prepare(
+    statuses: Iterable[DiagnosticStatus], limits: FleetLimits
+) -> tuple[list[_Prepared | None], Counter[str], int]:
+    """Statuses checked and cut to the limits (None where dropped), what was dropped, strings cut."""
+    max_length = limits.max_string_length
+    max_values = limits.max_values_per_component
+    truncated = 0
+    prepared: list[_Prepared | None] = []
+    dropped: Counter[str] = Counter()
+    for wire_level, name, message, hardware_id, values in statuses:
+        if not 0 <= wire_level <= 3:
+            dropped["invalid_level"] += 1
+            prepared.append(None)
+            continue
+        intact = True
+        if len(name) > max_length or len(hardware_id) > max_length or len(message) > max_length:
+            truncated += (
+                (len(name) > max_length) + (len(hardware_id) > max_length) + (len(message) > max_length)
+            )
+            name, hardware_id, message = name[:max_length], hardware_id[:max_length], message[:max_length]
+            intact = False
+        if len(values) > max_values:
+            dropped["value_limit"] += len(values) - max_values
+            values = values[:max_values]
+            intact = False
+        for value_key, value_text in values:
+            if len(value_key) > max_length or len(value_text) > max_length:
+                truncated += sum((len(k) > max_length) + (len(v) > max_length) for k, v in values)
+                values = tuple((k[:max_length], v[:max_length]) for k, v in values)
+                intact = False
+                break
+        prepared.append(((name, hardware_id), _LEVELS[wire_level], message, values, intact))
+    return prepared, dropped, truncated
+
+
 def _component(
     key: ComponentKey,
     level: Level,
@@ -323,5 +432,6 @@ def _replace_components(state: RobotState, components: dict[ComponentKey, Compon
         MappingProxyType(components),
         state.discovered_at,
         state.revision + 1,
-        state.message_keys.intersection(components),
+        tuple(key if key in components else None for key in state.latest),
+        state.missing.intersection(components),
     )
