@@ -11,6 +11,7 @@ from __future__ import annotations
 import struct
 
 from overseer.codec.errors import DecodeError
+from overseer.codec.wire import ArrayHead, StatusReader, WireFormat, decode_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 
 ENCAPSULATION_CDR_BE = b"\x00\x00\x00\x00"
@@ -31,6 +32,11 @@ _MIN_KEY_VALUE_BYTES = 8  # two empty strings
 
 def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
     """Decode a serialized DiagnosticArray (with its 4-byte encapsulation header)."""
+    return decode_array(WIRE_FORMAT, payload)
+
+
+def read_head(payload: bytes) -> ArrayHead:
+    """The array's header and status count, and the reader for its byte order."""
     end = len(payload)
     if end < 4:
         raise DecodeError(f"payload of {end} bytes is shorter than the encapsulation header")
@@ -49,9 +55,11 @@ def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
     pos += 4
     if count * _MIN_STATUS_BYTES > end - pos:
         raise DecodeError(f"status count {count} runs past the payload")
-    statuses: list[DiagnosticStatus] = []
-    append = statuses.append
-    for _ in range(count):
+    return ArrayHead(sec, nanosec, frame_id, count, pos, _READ_STATUS_LE if little else _READ_STATUS_BE)
+
+
+def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[name-defined]
+    def read_status(payload: bytes, pos: int, end: int) -> tuple[DiagnosticStatus, int]:
         if pos >= end:
             raise DecodeError("payload ends inside a status")
         level = payload[pos]
@@ -70,8 +78,9 @@ def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
             key, pos = _read_string(payload, pos, end, u32)
             value, pos = _read_string(payload, pos, end, u32)
             values.append((key, value))
-        append(DiagnosticStatus(level, name, message, hardware_id, tuple(values)))
-    return DiagnosticArray(sec, nanosec, frame_id, tuple(statuses))
+        return DiagnosticStatus(level, name, message, hardware_id, tuple(values)), pos
+
+    return read_status
 
 
 def _read_string(payload: bytes, pos: int, end: int, u32: struct._UnpackFrom) -> tuple[str, int]:  # type: ignore[name-defined]
@@ -89,6 +98,13 @@ def _read_string(payload: bytes, pos: int, end: int, u32: struct._UnpackFrom) ->
     if payload[stop - 1] != 0:
         raise DecodeError("string is not NUL-terminated")
     return payload[pos : stop - 1].decode("utf-8", "replace"), stop
+
+
+_READ_STATUS_LE = _status_reader(_U32_LE)
+_READ_STATUS_BE = _status_reader(_U32_BE)
+
+# CDR aligns to 4 bytes from the start of the data; the stamp follows the encapsulation header.
+WIRE_FORMAT = WireFormat(read_head, stamp=(4, 12), alignment=4, exact_end=False)
 
 
 def encode_diagnostic_array(array: DiagnosticArray, *, little_endian: bool = True) -> bytes:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import struct
 
 from overseer.codec.errors import DecodeError
+from overseer.codec.wire import ArrayHead, WireFormat, decode_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 
 MESSAGE_TYPE = "diagnostic_msgs/DiagnosticArray"
@@ -27,31 +28,35 @@ _MIN_KEY_VALUE_BYTES = 8  # two empty strings
 
 def decode_diagnostic_array(payload: bytes) -> DiagnosticArray:
     """Decode one serialized DiagnosticArray (a TCPROS frame's body); the header's seq is dropped."""
+    return decode_array(WIRE_FORMAT, payload)
+
+
+def read_head(payload: bytes) -> ArrayHead:
+    """The array's header and status count."""
     end = len(payload)
     if end < _HEADER.size:
         raise DecodeError(f"payload of {end} bytes is shorter than a header")
     _seq, sec, nanosec = _HEADER.unpack_from(payload)
     frame_id, pos = _read_string(payload, _HEADER.size, end)
     count, pos = _read_count(payload, pos, end, _MIN_STATUS_BYTES, "status")
-    statuses: list[DiagnosticStatus] = []
-    append = statuses.append
-    for _ in range(count):
-        if pos >= end:
-            raise DecodeError("payload ends inside a status")
-        level = payload[pos]
-        name, pos = _read_string(payload, pos + 1, end)
-        message, pos = _read_string(payload, pos, end)
-        hardware_id, pos = _read_string(payload, pos, end)
-        value_count, pos = _read_count(payload, pos, end, _MIN_KEY_VALUE_BYTES, "value")
-        values: list[tuple[str, str]] = []
-        for _ in range(value_count):
-            key, pos = _read_string(payload, pos, end)
-            value, pos = _read_string(payload, pos, end)
-            values.append((key, value))
-        append(DiagnosticStatus(level, name, message, hardware_id, tuple(values)))
-    if pos != end:
-        raise DecodeError(f"{end - pos} bytes left over after the message")
-    return DiagnosticArray(sec, nanosec, frame_id, tuple(statuses))
+    return ArrayHead(sec, nanosec, frame_id, count, pos, read_status)
+
+
+def read_status(payload: bytes, pos: int, end: int) -> tuple[DiagnosticStatus, int]:
+    """The status at `pos`, and the position after it."""
+    if pos >= end:
+        raise DecodeError("payload ends inside a status")
+    level = payload[pos]
+    name, pos = _read_string(payload, pos + 1, end)
+    message, pos = _read_string(payload, pos, end)
+    hardware_id, pos = _read_string(payload, pos, end)
+    value_count, pos = _read_count(payload, pos, end, _MIN_KEY_VALUE_BYTES, "value")
+    values: list[tuple[str, str]] = []
+    for _ in range(value_count):
+        key, pos = _read_string(payload, pos, end)
+        value, pos = _read_string(payload, pos, end)
+        values.append((key, value))
+    return DiagnosticStatus(level, name, message, hardware_id, tuple(values)), pos
 
 
 def _read_count(payload: bytes, pos: int, end: int, min_item_bytes: int, what: str) -> tuple[int, int]:
@@ -73,6 +78,10 @@ def _read_string(payload: bytes, pos: int, end: int) -> tuple[str, int]:
     if stop > end:
         raise DecodeError(f"string length {length} runs past the payload")
     return payload[pos:stop].decode("utf-8", "replace"), stop
+
+
+# No alignment; the header's seq and stamp change in every republished array.
+WIRE_FORMAT = WireFormat(read_head, stamp=(0, 12), alignment=1, exact_end=True)
 
 
 def encode_diagnostic_array(array: DiagnosticArray, seq: int = 0) -> bytes:
