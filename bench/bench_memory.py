@@ -10,12 +10,11 @@ import gc
 import re
 
 from bench.common import Row, emit, resident_bytes
-from overseer.codec.cdr import decode_diagnostic_array, encode_diagnostic_array
+from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.exposition import FleetExposition
 from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
-from overseer.sources.dds import CDR_STAMP
 from overseer.sources.ingest import PayloadIngest
 
 ROBOTS = 2000
@@ -34,7 +33,7 @@ def main() -> None:
     ingests = []
     for robot in range(ROBOTS):
         topic = f"rt/robot{robot}/diagnostics_agg"
-        ingest = PayloadIngest(model, f"robot{robot}", "dds", topic, decode_diagnostic_array, CDR_STAMP)
+        ingest = PayloadIngest(model, f"robot{robot}", "dds", topic, WIRE_FORMAT)
         ingest(bytes(bytearray(payloads[robot % len(payloads)])))  # a fresh copy, as DDS delivers it
         ingests.append(ingest)
     exposition.render()

@@ -13,7 +13,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -37,13 +37,14 @@ class FleetLimits:
     max_string_length: int = 1_024
 
 
-@dataclass(frozen=True, slots=True)
-class Component:
+class Component(NamedTuple):
     """The last status a component reported; `level` is the reported level, before staleness.
 
     `last_update` is when it was last reported in a message other than its robot's latest one; while it
     is in the latest message, `FleetSnapshot.last_update` gives that message's time instead. This lets
-    an unchanged message refresh a whole robot by replacing one `RobotState`.
+    an unchanged message refresh a whole robot by replacing one `RobotState`. A named tuple, not a frozen
+    dataclass: it is built for every status that changed, and a frozen dataclass is four times slower
+    to build.
     """
 
     name: str
@@ -176,12 +177,13 @@ class FleetModel:
         """Record a message identical to the robot's last one; False when it must be applied in full.
 
         With `revision`, the robot must still be as that revision left it: anything else that changed
-        it since (a forgotten topic, expired components) asks for a full apply too.
+        it since (a forgotten topic, expired components) asks for a full apply too. So does a message
+        that lost something, so that its losses are counted again each time it is received.
         """
         now = self._clock()
         with self._lock:
             state = self._robots.get(robot)
-            if state is None or state.last_message is None:
+            if state is None or state.last_message is None or None in state.latest:
                 return False
             if revision is not None and state.revision != revision:
                 return False
@@ -248,7 +250,7 @@ class FleetModel:
                 for key in state.components.keys() - state.missing - in_message:
                     left = components.get(key)
                     if left is not None:
-                        components[key] = replace(left, last_update=state.last_message)
+                        components[key] = left._replace(last_update=state.last_message)
             missing = (
                 _NONE_MISSING
                 if len(in_message) == len(components)

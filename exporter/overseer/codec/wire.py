@@ -6,6 +6,7 @@ changed since a robot's last array (`overseer.sources.ingest`).
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -38,15 +39,31 @@ class WireFormat(NamedTuple):
 
 def decode_array(wire: WireFormat, payload: bytes) -> DiagnosticArray:
     """Decode a whole payload in `wire`'s format."""
+    return decode_laid_out(wire, payload).decoded
+
+
+class LaidOut(NamedTuple):
+    """A decoded array, where each of its statuses began and the last one ended, and their reader."""
+
+    decoded: DiagnosticArray
+    bounds: array[int]
+    read_status: StatusReader
+
+
+def decode_laid_out(wire: WireFormat, payload: bytes) -> LaidOut:
+    """Decode a whole payload in `wire`'s format, keeping the statuses' positions."""
     head = wire.read_head(payload)
     end = len(payload)
     read_status = head.read_status
     pos = head.statuses_at
+    bounds = array("I", [pos])
     statuses: list[DiagnosticStatus] = []
     append = statuses.append
     for _ in range(head.status_count):
         status, pos = read_status(payload, pos, end)
         append(status)
+        bounds.append(pos)
     if wire.exact_end and pos != end:
         raise DecodeError(f"{end - pos} bytes left over after the message")
-    return DiagnosticArray(head.stamp_sec, head.stamp_nanosec, head.frame_id, tuple(statuses))
+    decoded = DiagnosticArray(head.stamp_sec, head.stamp_nanosec, head.frame_id, tuple(statuses))
+    return LaidOut(decoded, bounds, read_status)

@@ -22,8 +22,7 @@ from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from overseer.codec import DecodeError
-from overseer.codec.cdr import decode_diagnostic_array
+from overseer.codec import DecodeError, cdr
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
 from overseer.shard import Shard
@@ -39,7 +38,6 @@ TRANSPORT = "dds"
 DISCOVERY_INTERVAL_SECONDS = 0.2
 _TAKE_BATCH = 64
 _ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
-CDR_STAMP = (4, 12)  # the header stamp, after the 4-byte encapsulation header
 
 # ROS 2's default QoS profile for topics. Readers stay volatile so they match both volatile
 # and transient-local writers.
@@ -157,7 +155,7 @@ class DdsSource:
         log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
 
     def _on_data_callback(self, robot: str, topic_name: str) -> Any:
-        ingest = PayloadIngest(self._model, robot, TRANSPORT, topic_name, decode_diagnostic_array, CDR_STAMP)
+        ingest = PayloadIngest(self._model, robot, TRANSPORT, topic_name, cdr.WIRE_FORMAT)
 
         def on_data_available(reader: DataReader[DiagnosticArray]) -> None:
             try:

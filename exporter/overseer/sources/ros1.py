@@ -18,7 +18,7 @@ import time
 from typing import Any
 
 from overseer.codec import DecodeError
-from overseer.codec.ros1 import MESSAGE_TYPE, decode_diagnostic_array
+from overseer.codec.ros1 import MESSAGE_TYPE, WIRE_FORMAT
 from overseer.config import Ros1Config, Ros1Robot
 from overseer.model import FleetModel
 from overseer.sources.ingest import PayloadIngest
@@ -35,7 +35,6 @@ from overseer.sources.ros1_xmlrpc import (
 log = logging.getLogger(__name__)
 
 TRANSPORT = "ros1"
-ROS1_STAMP = (0, 12)  # the header's seq and stamp, which change in every republished array
 UNREGISTER_TIMEOUT_SECONDS = 1.0
 STOP_TIMEOUT_SECONDS = 5.0
 # Aggregators publish at 1 Hz, so only long silence means a dead connection rather than a quiet one.
@@ -145,9 +144,7 @@ class _RobotLink:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._apply_lock = threading.Lock()
-        self._ingest = PayloadIngest(
-            model, robot.name, TRANSPORT, self.topic, decode_diagnostic_array, ROS1_STAMP
-        )
+        self._ingest = PayloadIngest(model, robot.name, TRANSPORT, self.topic, WIRE_FORMAT)
         self._publishers: dict[str, _PublisherLink] = {}
         self._retired: list[_PublisherLink] = []
         self._caller_api: str | None = None
