@@ -5,9 +5,12 @@ from __future__ import annotations
 import re
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from prometheus_client import generate_latest
 from prometheus_client.registry import CollectorRegistry
 
+from overseer import exposition as exposition_module
 from overseer.exposition import FleetExposition
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.metrics import FleetCollector
@@ -90,3 +93,73 @@ def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     model.touch('robot0/quote"d', "dds")
     exposition.render()
     assert all(exposition._robots[name] is lines for name, lines in cached.items())
+
+
+def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    model, _ = fleet()
+    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    robot = "robot9"
+    three = tuple(DiagnosticStatus(0, f"/c{i}", "ok", "", (("v", str(i)),)) for i in range(3))
+    model.apply(robot, DiagnosticArray(0, 0, "", three), "dds")
+    exposition.render()
+    rendered: list[bytes] = []
+    original_add = exposition_module._LinesBuilder.add
+
+    def counting_add(self: exposition_module._LinesBuilder, index: int, *family_lines: bytes) -> None:
+        rendered.append(family_lines[0])
+        original_add(self, index, *family_lines)
+
+    monkeypatch.setattr(exposition_module._LinesBuilder, "add", counting_add)
+    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
+    model.apply(robot, DiagnosticArray(0, 0, "", changed), "dds")
+    fast, reference = both(model, exposition)
+    assert fast == reference
+    assert len(rendered) == 1 and b'component="/c1"' in rendered[0]
+
+
+# Property: through any sequence of model changes, the cached exposition equals the collector's.
+_statuses = st.lists(
+    st.builds(
+        DiagnosticStatus,
+        level=st.integers(0, 3),
+        name=st.sampled_from(["/a", "/b", "/c", 'q"uote', "/\u2603"]),
+        message=st.sampled_from(["", "ok", "hot"]),
+        hardware_id=st.sampled_from(["", "hw"]),
+        values=st.lists(
+            st.tuples(st.sampled_from(["v", "t"]), st.sampled_from(["1", "2.5", "x", "nan"])), max_size=2
+        ).map(tuple),
+    ),
+    max_size=5,
+).map(tuple)
+_robots = st.sampled_from(["r0", "r1", "r2\n"])
+_steps = st.one_of(
+    st.tuples(st.just("apply"), _robots, _statuses),
+    st.tuples(st.just("touch"), _robots),
+    st.tuples(st.just("advance"), st.sampled_from([1.0, 3.0, 6.0, 11.0, 61.0])),
+    st.tuples(st.just("expire")),
+    st.tuples(st.just("forget"), _robots),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(steps=st.lists(_steps, min_size=1, max_size=12))
+def test_cached_exposition_equals_collector_through_any_changes(steps: list[tuple[object, ...]]) -> None:
+    clock = Clock()
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
+    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    for step in steps:
+        match step:
+            case ("apply", str(robot), tuple(statuses)):
+                model.apply(robot, DiagnosticArray(0, 0, "", statuses), "dds", "t")
+            case ("touch", str(robot)):
+                model.touch(robot, "dds")
+            case ("advance", float(seconds)):
+                clock.now += seconds
+            case ("expire",):
+                model.expire()
+            case ("forget", str(robot)):
+                model.forget_topic(robot, "t")
+        fast, reference = both(model, exposition)
+        assert fast == reference

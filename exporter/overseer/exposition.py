@@ -10,6 +10,7 @@ from __future__ import annotations
 import bisect
 import re
 import threading
+from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import cast
@@ -19,7 +20,7 @@ from prometheus_client.utils import floatToGoString
 from overseer import __version__
 from overseer.levels import Level, worst
 from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts
-from overseer.model import FleetModel, FleetSnapshot, RobotState
+from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 
@@ -34,7 +35,14 @@ def escape_label_value(value: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class _RobotLines:
-    """One robot's rendered per-component lines and what they were rendered for."""
+    """One robot's rendered per-component lines and what they were rendered for.
+
+    `levels`, `changes` and `values` hold every component's lines of each family; component i's lines
+    of family k start at `offsets[3 * i + k]`. `components` are the records they were rendered from
+    (None for those missing from the latest message): a component whose record is the same object
+    again renders the same lines (when the robot's up and freshness did not change), so they are
+    copied instead.
+    """
 
     signature: tuple[int, bool, bool, int]
     revision: int
@@ -43,6 +51,8 @@ class _RobotLines:
     levels: bytes
     changes: bytes
     values: bytes
+    components: tuple[Component | None, ...]
+    offsets: array[int]
 
 
 class FleetExposition:
@@ -139,34 +149,100 @@ def _lines_for(
     if cached is not None and cached.signature == signature:
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
-    # per-render caches make rebuilding cheap, since a fleet repeats its names, keys and values.
+    # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
     escape, number, pairs = render.escape, render.number, render.numbers.pairs
     robot_label = f'robot="{escape(robot.name)}"'
-    levels: list[str] = []
-    changes: list[str] = []
-    values: list[str] = []
-    found: list[Level] = []
-    for key, component in robot.components.items():
+    reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
+    lines = _LinesBuilder(cached)
+    missing = robot.missing
+    levels = snapshot.component_levels(robot, up)
+    items = list(robot.components.items())
+    # A component whose record is the same object at the same place, while neither up nor freshness
+    # changed, renders the same lines: only the others are rendered, the rest is copied.
+    fresh = [
+        index
+        for index, (old, (key, component)) in enumerate(zip(reusable, items, strict=False))
+        if old is not component or key in missing
+    ]
+    fresh.extend(range(len(reusable), len(items)))
+    for index in fresh:
+        component = items[index][1]
         identity = f'component="{escape(component.name)}",hardware_id="{escape(component.hardware_id)}"'
         labels = f"{{{identity},{robot_label}}} "
-        level = snapshot.component_level(robot, key, component, up)
-        found.append(level)
-        levels.append(f"ros_diagnostics_level{labels}{_LEVEL_VALUES[level]}\n")
-        changes.append(
-            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n"
+        values = "".join(
+            [
+                f'ros_diagnostics_value{{{identity},key="{escape(key)}",{robot_label}}} {number(value)}\n'
+                for key, value in pairs(component.values)
+            ]
         )
-        for value_key, value in pairs(component.values):
-            key_label = f'key="{escape(value_key)}"'
-            values.append(f"ros_diagnostics_value{{{identity},{key_label},{robot_label}}} {number(value)}\n")
+        lines.add(
+            index,
+            f"ros_diagnostics_level{labels}{_LEVEL_VALUES[levels[index]]}\n".encode(),
+            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode(),
+            values.encode(),
+        )
+    level_lines, changes, values_lines, offsets = lines.finish(len(levels))
+    # A component missing from the latest message renders by its own time: never copied (None).
+    records = (
+        tuple(component if key not in missing else None for key, component in robot.components.items())
+        if missing
+        else tuple(robot.components.values())
+    )
     return _RobotLines(
         signature,
         robot.revision,
         other_updates,
-        worst(found) if up else Level.STALE,
-        "".join(levels).encode(),
-        "".join(changes).encode(),
-        "".join(values).encode(),
+        worst(levels) if up else Level.STALE,
+        level_lines,
+        changes,
+        values_lines,
+        records,
+        offsets,
     )
+
+
+class _LinesBuilder:
+    """Builds a robot's three families of lines from new lines and, between them, the cached ones."""
+
+    def __init__(self, cached: _RobotLines | None) -> None:
+        self._cached = cached
+        self._pieces: tuple[list[bytes], list[bytes], list[bytes]] = ([], [], [])
+        self._sizes = [0, 0, 0]
+        self._offsets = array("I", self._sizes)
+        self._next = 0  # the first component not yet in the pieces
+
+    def add(self, index: int, *family_lines: bytes) -> None:
+        """Component `index`'s freshly rendered lines, one bytes per family; those before it come cached."""
+        self._copy_cached(index)
+        for family, text in enumerate(family_lines):
+            self._pieces[family].append(text)
+            self._sizes[family] += len(text)
+        self._offsets.extend(self._sizes)
+        self._next = index + 1
+
+    def finish(self, count: int) -> tuple[bytes, bytes, bytes, array[int]]:
+        """The families' bytes for `count` components, and where every component's lines start."""
+        self._copy_cached(count)
+        levels, changes, values = (b"".join(pieces) for pieces in self._pieces)
+        return levels, changes, values, self._offsets
+
+    def _copy_cached(self, stop: int) -> None:
+        """Copy the cached lines of components `self._next` to `stop` (where they had the same index)."""
+        if stop == self._next or self._cached is None:
+            return
+        cached, first, last = self._cached, 3 * self._next, 3 * stop
+        old = cached.offsets
+        shifts = []
+        for family, text in enumerate((cached.levels, cached.changes, cached.values)):
+            start, end = old[first + family], old[last + family]
+            self._pieces[family].append(text[start:end])
+            shifts.append(self._sizes[family] - start)
+            self._sizes[family] += end - start
+        if any(shifts):
+            self._offsets.extend([old[i] + shifts[i % 3] for i in range(first + 3, last + 3)])
+        else:
+            self._offsets.extend(old[first + 3 : last + 3])
+        self._next = stop
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}

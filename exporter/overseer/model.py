@@ -124,6 +124,25 @@ class FleetSnapshot:
             return Level.STALE
         return component.level
 
+    def component_levels(self, robot: RobotState, robot_up: bool) -> list[Level]:
+        """Every component's level now, in the order of `robot.components` (as `component_level`)."""
+        if not robot_up:
+            return [Level.STALE] * len(robot.components)
+        fresh = (
+            robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.stale_after
+        )
+        missing = robot.missing
+        if not missing:  # almost always: every level follows from the latest message's time
+            if fresh:
+                return [component.level for component in robot.components.values()]
+            return [Level.STALE] * len(robot.components)
+        return [
+            self.component_level(robot, key, component, True)
+            if key in missing
+            else (component.level if fresh else Level.STALE)
+            for key, component in robot.components.items()
+        ]
+
     def robot_level(self, robot: RobotState) -> Level:
         """The robot's worst component level by severity order (STALE when the robot is down)."""
         if not self.robot_up(robot):
