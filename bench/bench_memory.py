@@ -1,7 +1,8 @@
 """Memory: resident bytes per component with 100,000 components, everything the exporter keeps included.
 
-Each robot's array arrives as its own bytes object and goes through the DDS source's ingest (decode,
-apply, remember a digest) into the model, then the exposition renders once and keeps its cache.
+Each robot's arrays arrive as bytes objects of their own and go through the DDS source's ingest into
+the model: three arrays a robot, the later ones with other voltages (so that the ingest's changed-status
+path and the exposition's partial re-render run too), the exposition rendering after each.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from bench.common import Row, emit, resident_bytes
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.exposition import FleetExposition
 from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
-from overseer.messages import DiagnosticArray
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.sources.ingest import PayloadIngest
 
@@ -25,18 +26,19 @@ def main() -> None:
     """Measure and print the rows."""
     leaves = leaf_components(LEAVES)
     statuses = tuple(aggregated_statuses(leaves, initial_levels(leaves, 2, 2), set()))
-    payloads = [encode_diagnostic_array(DiagnosticArray(i, 0, "", statuses)) for i in range(8)]
     model = FleetModel(FleetLimits(max_robots=ROBOTS))
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
     gc.collect()
     before = resident_bytes()
-    ingests = []
-    for robot in range(ROBOTS):
-        topic = f"rt/robot{robot}/diagnostics_agg"
-        ingest = PayloadIngest(model, f"robot{robot}", "dds", topic, WIRE_FORMAT)
-        ingest(bytes(bytearray(payloads[robot % len(payloads)])))  # a fresh copy, as DDS delivers it
-        ingests.append(ingest)
-    exposition.render()
+    ingests = [
+        PayloadIngest(model, f"robot{robot}", "dds", f"rt/robot{robot}/diagnostics_agg", WIRE_FORMAT)
+        for robot in range(ROBOTS)
+    ]
+    # Three arrays a robot, each with other voltages than the one before, scraped after each.
+    for second in range(3):
+        for robot, ingest in enumerate(ingests):
+            ingest(payload(statuses, f"{11 + robot / ROBOTS + second / 100:.5f}", second))
+        exposition.render()
     gc.collect()
     components = sum(len(r.components) for r in model.snapshot().robots)
     per_component = (resident_bytes() - before) / components
@@ -53,6 +55,14 @@ def main() -> None:
             ),
         ]
     )
+
+
+def payload(statuses: tuple[DiagnosticStatus, ...], voltage: str, second: int) -> bytes:
+    """An array of `statuses` with every voltage set to `voltage`, serialized as DDS delivers it."""
+    varied = tuple(
+        s._replace(values=tuple((k, voltage if k == "voltage" else v) for k, v in s.values)) for s in statuses
+    )
+    return encode_diagnostic_array(DiagnosticArray(second, 0, "", varied))
 
 
 if __name__ == "__main__":

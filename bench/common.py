@@ -78,11 +78,16 @@ def resident_bytes(pid: int | None = None) -> int:
         return int(statm.read().split()[1]) * _PAGE
 
 
-def best_rate(work: Callable[[], int], repeats: int = 5) -> float:
-    """Items per second of the fastest of `repeats` runs of `work` (which returns its item count)."""
-    best = 0.0
-    for _ in range(repeats):
-        started = time.perf_counter()
-        items = work()
-        best = max(best, items / (time.perf_counter() - started))
+def interleaved_rates(workloads: dict[str, Callable[[], int]], rounds: int = 5) -> dict[str, float]:
+    """Items per CPU second of each workload's fastest run (each returns its item count).
+
+    The workloads take turns, round after round, so that a neighbour loading this shared machine
+    slows all of them alike, and CPU time leaves out the time this process was not running.
+    """
+    best = dict.fromkeys(workloads, 0.0)
+    for _ in range(rounds):
+        for name, work in workloads.items():
+            started = time.process_time()
+            items = work()
+            best[name] = max(best[name], items / (time.process_time() - started))
     return best

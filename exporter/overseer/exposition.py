@@ -83,7 +83,9 @@ class FleetExposition:
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
-            lines = _lines_for(snapshot, robot, up, previous.get(robot.name), render)
+            # Popped, so that a robot's old lines go as soon as its new ones exist: the old and the
+            # new cache of the whole fleet never need memory at the same time.
+            lines = _lines_for(snapshot, robot, up, previous.pop(robot.name, None), render)
             current[robot.name] = lines
             levels.append(lines.levels)
             changes.append(lines.changes)

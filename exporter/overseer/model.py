@@ -44,17 +44,26 @@ class Component(NamedTuple):
     is in the latest message, `FleetSnapshot.last_update` gives that message's time instead. This lets
     an unchanged message refresh a whole robot by replacing one `RobotState`. A named tuple, not a frozen
     dataclass: it is built for every status that changed, and a frozen dataclass is four times slower
-    to build.
+    to build. `key` is the very tuple that keys it in its robot's components (and in `latest`).
     """
 
-    name: str
-    hardware_id: str
+    key: ComponentKey
     level: Level
     message: str
     values: tuple[tuple[str, str], ...]
     last_update: float
     level_changes: int
     topic: str
+
+    @property
+    def name(self) -> str:
+        """The status's name."""
+        return self.key[0]
+
+    @property
+    def hardware_id(self) -> str:
+        """The status's hardware_id."""
+        return self.key[1]
 
 
 @dataclass(frozen=True, slots=True)
@@ -253,7 +262,8 @@ class FleetModel:
                         dropped["component_limit"] += 1
                         latest.append(None)
                         continue
-                    components[key] = _component(key, level, message, values, now, 0, topic)
+                    previous = _component(_interned(key), level, message, values, now, 0, topic)
+                    components[previous.key] = previous
                 elif (
                     previous.level is not level
                     or previous.message != message
@@ -261,7 +271,8 @@ class FleetModel:
                     or previous.topic != topic
                 ):
                     changes = previous.level_changes + (previous.level is not level)
-                    components[key] = _component(key, level, message, values, now, changes, topic)
+                    components[key] = _component(previous.key, level, message, values, now, changes, topic)
+                key = previous.key  # the fleet's shared copy, not this message's
                 latest.append(key if intact and key not in in_message else None)
                 in_message.add(key)
             if state is not None and state.last_message is not None:
@@ -329,7 +340,7 @@ class FleetModel:
                     or previous.topic != topic
                 ):
                     changes = previous.level_changes + (previous.level is not level)
-                    components[key] = _component(key, level, message, values, now, changes, topic)
+                    components[key] = _component(previous.key, level, message, values, now, changes, topic)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -431,18 +442,15 @@ def _component(
     changes: int,
     topic: str,
 ) -> Component:
-    # Robots of one fleet repeat the same names, messages and keys: interning stores each text once.
+    # Robots of one fleet repeat the same messages and keys: interning stores each text once.
     intern = sys.intern
     return Component(
-        intern(key[0]),
-        intern(key[1]),
-        level,
-        intern(message),
-        tuple((intern(k), v) for k, v in values),
-        now,
-        changes,
-        topic,
+        key, level, intern(message), tuple([(intern(k), v) for k, v in values]), now, changes, topic
     )
+
+
+def _interned(key: ComponentKey) -> ComponentKey:
+    return sys.intern(key[0]), sys.intern(key[1])
 
 
 def _replace_components(state: RobotState, components: dict[ComponentKey, Component]) -> RobotState:
