@@ -264,14 +264,8 @@ class FleetModel:
                         continue
                     previous = _component(_interned(key), level, message, values, now, 0, topic)
                     components[previous.key] = previous
-                elif (
-                    previous.level is not level
-                    or previous.message != message
-                    or previous.values != values
-                    or previous.topic != topic
-                ):
-                    changes = previous.level_changes + (previous.level is not level)
-                    components[key] = _component(previous.key, level, message, values, now, changes, topic)
+                else:
+                    components[key] = _merged(previous, level, message, values, now, topic)
                 key = previous.key  # the fleet's shared copy, not this message's
                 latest.append(key if intact and key not in in_message else None)
                 in_message.add(key)
@@ -332,15 +326,7 @@ class FleetModel:
                 merged.append(entry)
             components = dict(state.components)
             for key, level, message, values, _intact in merged:
-                previous = components[key]
-                if (
-                    previous.level is not level
-                    or previous.message != message
-                    or previous.values != values
-                    or previous.topic != topic
-                ):
-                    changes = previous.level_changes + (previous.level is not level)
-                    components[key] = _component(previous.key, level, message, values, now, changes, topic)
+                components[key] = _merged(components[key], level, message, values, now, topic)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -447,6 +433,26 @@ def _component(
     return Component(
         key, level, intern(message), tuple([(intern(k), v) for k, v in values]), now, changes, topic
     )
+
+
+def _merged(
+    previous: Component,
+    level: Level,
+    message: str,
+    values: tuple[tuple[str, str], ...],
+    now: float,
+    topic: str,
+) -> Component:
+    """The component's record after a status: `previous` itself when the status says nothing new."""
+    if (
+        previous.level is level
+        and previous.message == message
+        and previous.values == values
+        and previous.topic == topic
+    ):
+        return previous
+    changes = previous.level_changes + (previous.level is not level)
+    return _component(previous.key, level, message, values, now, changes, topic)
 
 
 def _interned(key: ComponentKey) -> ComponentKey:
