@@ -1,9 +1,9 @@
 """End to end over DDS: the largest fleet at 1 Hz the exporter follows with no lost update, and its CPU.
 
-The simulator (one process, one participant) publishes every robot's /diagnostics_agg at 1 Hz with a
-voltage that changes at every publication (--vary-values: nothing can be skipped), after waiting until
-the exporter has subscribed to every robot. Lost updates = messages the simulator wrote minus messages
-the exporter counted as received.
+The simulator (one process, one participant) publishes every robot's /diagnostics_agg at 1 Hz with
+voltages that change at every publication (--vary-values: no array repeats the one before), after
+waiting until the exporter has subscribed to every robot. Lost updates = messages the simulator wrote
+minus messages the exporter counted as received.
 """
 
 from __future__ import annotations
