@@ -146,7 +146,7 @@ def _lines_for(
         components = robot.components
         other_updates = sorted(components[key].last_update for key in robot.missing)
     horizon = snapshot.taken_at - snapshot.limits.stale_after
-    message_stale = robot.last_message is None or robot.last_message < horizon
+    message_stale = not snapshot.fresh(robot.last_message)
     signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))
     if cached is not None and cached.signature == signature:
         return cached
@@ -161,13 +161,13 @@ def _lines_for(
     items = list(robot.components.items())
     # A component whose record is the same object at the same place, while neither up nor freshness
     # changed, renders the same lines: only the others are rendered, the rest is copied.
-    fresh = [
+    to_render = [
         index
         for index, (old, (key, component)) in enumerate(zip(reusable, items, strict=False))
         if old is not component or key in missing
     ]
-    fresh.extend(range(len(reusable), len(items)))
-    for index in fresh:
+    to_render.extend(range(len(reusable), len(items)))
+    for index in to_render:
         component = items[index][1]
         identity = f'component="{escape(component.name)}",hardware_id="{escape(component.hardware_id)}"'
         labels = f"{{{identity},{robot_label}}} "
@@ -186,7 +186,7 @@ def _lines_for(
     level_lines, changes, values_lines, offsets = lines.finish(len(levels))
     # A component missing from the latest message renders by its own time: never copied (None).
     records = (
-        tuple(component if key not in missing else None for key, component in robot.components.items())
+        tuple(component if key not in missing else None for key, component in items)
         if missing
         else tuple(robot.components.values())
     )

@@ -127,19 +127,19 @@ class FleetSnapshot:
         self, robot: RobotState, key: ComponentKey, component: Component, robot_up: bool
     ) -> Level:
         """The component's level now: STALE when not updated for `stale_after` or its robot is down."""
-        if not robot_up:
-            return Level.STALE
-        if self.taken_at - self.last_update(robot, key, component) > self.limits.stale_after:
+        if not robot_up or not self.fresh(self.last_update(robot, key, component)):
             return Level.STALE
         return component.level
+
+    def fresh(self, updated: float | None) -> bool:
+        """True when something updated at `updated` (None: never) is within `stale_after` of now."""
+        return updated is not None and self.taken_at - updated <= self.limits.stale_after
 
     def component_levels(self, robot: RobotState, robot_up: bool) -> list[Level]:
         """Every component's level now, in the order of `robot.components` (as `component_level`)."""
         if not robot_up:
             return [Level.STALE] * len(robot.components)
-        fresh = (
-            robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.stale_after
-        )
+        fresh = self.fresh(robot.last_message)
         missing = robot.missing
         if not missing:  # almost always: every level follows from the latest message's time
             if fresh:
@@ -156,7 +156,7 @@ class FleetSnapshot:
         """The robot's worst component level by severity order (STALE when the robot is down)."""
         if not self.robot_up(robot):
             return Level.STALE
-        return worst(self.component_level(robot, k, c, True) for k, c in robot.components.items())
+        return worst(self.component_levels(robot, True))
 
     def find(self, name: str) -> RobotState | None:
         """The robot called `name`, or None."""
