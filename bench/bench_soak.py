@@ -1,7 +1,7 @@
 """Soak: a 100-robot fleet at 1 Hz for 30 minutes (`--duration`), scraped every 5 s; memory and latency flat.
 
 The exporter and the simulator run as processes over loopback DDS. The simulator waits for the exporter's
-readers, changes a voltage at every publication (--vary-values: every message is decoded), and reports
+readers, changes voltages at every publication (--vary-values: no array repeats the one before), and reports
 what it published; lost updates are that count minus the exporter's `received` counter. Every scrape is
 parsed and must show every robot up and no component STALE. Memory and latency compare the run's early
 part (10-25 % of the time, after warm-up) with its end (the last 15 %).
@@ -22,8 +22,6 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from prometheus_client.parser import text_string_to_metric_families
-
 from bench.common import Row, cpu_seconds, emit, resident_bytes
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,6 +29,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
 from support.processes import RunningProcess, overseer_command, running_exporter, spawn  # noqa: E402
+from support.scrapes import parse_scrape  # noqa: E402
 
 MEMORY_GROWTH_TARGET_MB = 5.0
 LATENCY_GROWTH_TARGET = 1.5  # late median at most this times the early one (plus 2 ms)
@@ -54,21 +53,9 @@ def scrape(url: str, pid: int, robots: int, started: float) -> Sample:
     with urllib.request.urlopen(url + "/metrics", timeout=30) as response:
         text = response.read().decode("utf-8")
     latency = time.monotonic() - begun
-    up = stale = 0
-    received = lost = 0.0
-    for family in text_string_to_metric_families(text):
-        for sample in family.samples:
-            if sample.name == "ros_diagnostics_robot_up":
-                up += sample.value == 1
-            elif sample.name == "ros_diagnostics_level":
-                stale += sample.value == 3
-            elif sample.name == "overseer_messages_total":
-                if sample.labels["result"] == "received":
-                    received += sample.value
-                else:
-                    lost += sample.value
-    healthy = up == robots and stale == 0
-    return Sample(begun - started, latency, resident_bytes(pid), healthy, received, lost)
+    shown = parse_scrape(text)
+    healthy = shown.robots_up == robots and shown.stale_components == 0
+    return Sample(begun - started, latency, resident_bytes(pid), healthy, shown.received, shown.lost)
 
 
 def window(samples: list[Sample], duration: float, start: float, end: float) -> list[Sample]:

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.registry import CollectorRegistry
 
 import overseer.http
@@ -34,6 +33,7 @@ from overseer.messages import DiagnosticArray
 from overseer.metrics import FleetCollector
 from overseer.model import FleetLimits, FleetModel
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
+from support.scrapes import Scrape, parse_scrape
 
 ROBOTS, COMPONENTS_PER_ROBOT, RATE_HZ = 50, 25, 5.0  # --components=20 leaves plus 5 group statuses
 SCRAPERS, LOAD_SECONDS = 20, 20.0
@@ -46,17 +46,6 @@ SIMULATOR_FLAGS = (
 )
 
 
-@dataclass(frozen=True)
-class Scrape:
-    """What one /metrics scrape showed."""
-
-    robots_up: int
-    stale_components: int
-    components: int
-    received: float
-    lost: float  # decode errors and drops
-
-
 def fetch_metrics(exporter: Exporter, timeout: float = 10.0) -> str:
     """The text of GET /metrics."""
     with urllib.request.urlopen(exporter.url + "/metrics", timeout=timeout) as response:
@@ -65,26 +54,7 @@ def fetch_metrics(exporter: Exporter, timeout: float = 10.0) -> str:
 
 def scrape(exporter: Exporter) -> Scrape:
     """One /metrics scrape, parsed."""
-    return parse(fetch_metrics(exporter))
-
-
-def parse(text: str) -> Scrape:
-    """What a scrape shows, read with prometheus-client's parser (which raises on invalid text)."""
-    up = stale = components = 0
-    received = lost = 0.0
-    for family in text_string_to_metric_families(text):
-        for sample in family.samples:
-            if sample.name == "ros_diagnostics_robot_up":
-                up += sample.value == 1
-            elif sample.name == "ros_diagnostics_level":
-                components += 1
-                stale += sample.value == 3
-            elif sample.name == "overseer_messages_total":
-                if sample.labels["result"] == "received":
-                    received += sample.value
-                else:
-                    lost += sample.value
-    return Scrape(up, stale, components, received, lost)
+    return parse_scrape(fetch_metrics(exporter))
 
 
 def fleet_whole(exporter: Exporter) -> Scrape | None:
@@ -137,7 +107,7 @@ class ScrapeLog:
             try:
                 text = fetch_metrics(exporter)
                 fetched = time.monotonic()
-                result = parse(text)
+                result = parse_scrape(text)
                 problem = ""
                 if result.robots_up != ROBOTS or result.stale_components or result.lost:
                     problem = f"unhealthy fleet in a scrape: {result}"

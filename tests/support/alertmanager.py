@@ -12,18 +12,14 @@ from typing import Any
 
 import yaml
 
-from support.ports import free_port
-from support.processes import RunningProcess, spawn
-from support.prometheus import REPO, wait_until_ready
+from support.prometheus import REPO, RunningServer, running_server
 
 EXAMPLE = REPO / "alert_rules" / "alertmanager.example.yml"
 
 
 @dataclass
-class Alertmanager(RunningProcess):
-    """A running Alertmanager and its base URL."""
-
-    url: str
+class Alertmanager(RunningServer):
+    """A running Alertmanager."""
 
     def alerts(self) -> list[dict[str, Any]]:
         """Every alert it holds, with `status.state` active or suppressed and `status.inhibitedBy`."""
@@ -52,22 +48,12 @@ def example_config(webhook_url: str, timing: dict[str, str] | None = None) -> di
 @contextmanager
 def running_alertmanager(tmp_path: Path, config: dict[str, Any]) -> Iterator[Alertmanager]:
     """Run Debian's `prometheus-alertmanager` on loopback, clustering off, until the block ends."""
-    port = free_port()
-    directory = tmp_path / f"alertmanager-{port}"
-    directory.mkdir()
-    config_path = directory / "alertmanager.yml"
-    config_path.write_text(yaml.safe_dump(config), encoding="utf-8")
-    args = [
+    with running_server(
+        tmp_path,
+        Alertmanager,
         "prometheus-alertmanager",
-        f"--config.file={config_path}",
-        f"--storage.path={directory / 'data'}",
-        f"--web.listen-address=127.0.0.1:{port}",
+        config,
+        "--storage.path",
         "--cluster.listen-address=",
-    ]
-    log_path = directory / "alertmanager.log"
-    alertmanager = Alertmanager(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
-    try:
-        wait_until_ready(alertmanager, alertmanager.url + "/-/ready")
+    ) as alertmanager:
         yield alertmanager
-    finally:
-        alertmanager.stop()

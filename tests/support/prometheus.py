@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
 import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 
@@ -79,10 +80,18 @@ def load_rules(path: Path) -> list[dict[str, Any]]:
 
 
 @dataclass
-class Prometheus(RunningProcess):
-    """A running Prometheus server and its base URL."""
+class RunningServer(RunningProcess):
+    """A running server of Prometheus' family and its base URL."""
 
     url: str
+
+
+ServerT = TypeVar("ServerT", bound=RunningServer)
+
+
+@dataclass
+class Prometheus(RunningServer):
+    """A running Prometheus server."""
 
     def api(self, path: str, **params: str) -> Any:
         """The `data` of a successful GET /api/v1/`path`."""
@@ -162,21 +171,39 @@ def wait_until_ready(server: RunningProcess, url: str, timeout: float = 30.0) ->
 @contextmanager
 def running_prometheus(tmp_path: Path, config: dict[str, Any]) -> Iterator[Prometheus]:
     """Run Debian's `prometheus` on loopback with `config` and temporary storage until the block ends."""
+    with running_server(tmp_path, Prometheus, "prometheus", config, "--storage.tsdb.path") as prometheus:
+        yield prometheus
+
+
+@contextmanager
+def running_server(
+    tmp_path: Path,
+    server_class: Callable[[subprocess.Popen[bytes], Path, str], ServerT],
+    program: str,
+    config: dict[str, Any],
+    storage_flag: str,
+    *flags: str,
+) -> Iterator[ServerT]:
+    """Run `program` of Prometheus' family on a free loopback port with `config` until the block ends.
+
+    Its storage goes under `tmp_path` (`storage_flag`); it is ready when GET /-/ready answers.
+    """
     port = free_port()
-    directory = tmp_path / f"prometheus-{port}"
+    directory = tmp_path / f"{program}-{port}"
     directory.mkdir()
-    config_path = directory / "prometheus.yml"
+    config_path = directory / f"{program}.yml"
     config_path.write_text(yaml.safe_dump(config), encoding="utf-8")
     args = [
-        "prometheus",
+        program,
         f"--config.file={config_path}",
-        f"--storage.tsdb.path={directory / 'data'}",
+        f"{storage_flag}={directory / 'data'}",
         f"--web.listen-address=127.0.0.1:{port}",
+        *flags,
     ]
-    log_path = directory / "prometheus.log"
-    prometheus = Prometheus(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    log_path = directory / f"{program}.log"
+    server = server_class(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
     try:
-        wait_until_ready(prometheus, prometheus.url + "/-/ready")
-        yield prometheus
+        wait_until_ready(server, server.url + "/-/ready")
+        yield server
     finally:
-        prometheus.stop()
+        server.stop()
