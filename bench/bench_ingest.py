@@ -17,9 +17,9 @@ from collections.abc import Callable
 from bench.common import Row, emit, interleaved_rates
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.codec.wire import decode_array
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from overseer.sources.dds_types import DiagnosticArray as IdlDiagnosticArray
 from overseer.sources.ingest import PayloadIngest
 

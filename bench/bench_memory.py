@@ -12,10 +12,10 @@ import re
 
 from bench.common import Row, emit, resident_bytes
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
-from overseer.exposition import FleetExposition
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from overseer.sources.ingest import PayloadIngest
 
 ROBOTS = 2000

@@ -18,12 +18,12 @@ import urllib.request
 from prometheus_client import CollectorRegistry, Counter, Gauge, start_http_server
 
 from bench.common import Row, emit
-from overseer.exposition import FleetExposition
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
-from overseer.http import OverseerServer
 from overseer.messages import DiagnosticArray
-from overseer.metrics import FleetCollector
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.http import OverseerServer
+from overseer.serve.metrics import FleetCollector
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 
 LEAVES = 50
 TARGET_MS = 250

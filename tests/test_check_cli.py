@@ -8,9 +8,9 @@ import sys
 import pytest
 
 from overseer import __version__
-from overseer.check import main, options_from_flags, parse_flags
-from overseer.check_http import parse_answer, parse_url, quote_path, request_bytes
-from overseer.check_report import CRITICAL, UNKNOWN, WARNING, CheckError
+from overseer.check.http_client import parse_answer, parse_url, quote_path, request_bytes
+from overseer.check.plugin import main, options_from_flags, parse_flags
+from overseer.check.report import CRITICAL, UNKNOWN, WARNING, CheckError
 
 TIMEOUT_HINT = "give seconds, more than 0 and less than a day"
 
@@ -206,9 +206,10 @@ def test_check_imports_no_json_re_or_typing_only_c_modules_and_its_own() -> None
         "_socket",
         "overseer",
         "overseer.check",
-        "overseer.check_http",
-        "overseer.check_json",
-        "overseer.check_report",
+        "overseer.check.plugin",
+        "overseer.check.http_client",
+        "overseer.check.api_reader",
+        "overseer.check.report",
     }
 
 

@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from overseer.check_report import (
+from overseer.check.report import (
     CRITICAL,
     OK,
     UNKNOWN,

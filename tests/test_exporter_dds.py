@@ -6,8 +6,8 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.ports import fresh_domain_id
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 

@@ -10,11 +10,11 @@ from hypothesis import strategies as st
 from prometheus_client import generate_latest
 from prometheus_client.registry import CollectorRegistry
 
-from overseer import exposition as exposition_module
-from overseer.exposition import FleetExposition
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.metrics import FleetCollector
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve import exposition as exposition_module
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.metrics import FleetCollector
 
 
 class Clock:

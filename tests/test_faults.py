@@ -18,8 +18,8 @@ from typing import Any
 
 import pytest
 
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.alertmanager import running_alertmanager
 from support.netns import VethNamespace, veth_namespace
 from support.ports import free_port
@@ -177,7 +177,7 @@ def test_restarted_exporter_has_the_whole_fleet_within_one_period_after_discover
 
 PUBLISHER = """
 import sys
-from overseer.simulate import FleetSimulator, SimulatorSettings
+from overseer.simulator.publisher import FleetSimulator, SimulatorSettings
 from overseer.sources.cyclone_config import configure_domain
 
 domain = int(sys.argv[1])

@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from overseer.shard import Shard
+from overseer.model.shard import Shard
 from support.processes import running_exporter, running_simulator, wait_for
 from support.prometheus import Prometheus, running_prometheus
 

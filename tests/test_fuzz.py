@@ -33,12 +33,12 @@ from prometheus_client.registry import CollectorRegistry
 
 from overseer.codec import DecodeError, cdr, ros1
 from overseer.config import ConfigError, config_from_dict, load_config
-from overseer.exposition import FleetExposition
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.metrics import FleetCollector
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.metrics import FleetCollector
+from overseer.serve.web_config import load_web_config, web_security_from_dict
 from overseer.sources.ros1_tcpros import TcprosError, decode_header
-from overseer.web_config import load_web_config, web_security_from_dict
 
 Decoder = Callable[[bytes], DiagnosticArray]
 DECODERS: dict[str, tuple[Decoder, Callable[[DiagnosticArray], bytes]]] = {

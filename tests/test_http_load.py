@@ -25,13 +25,18 @@ from pathlib import Path
 import pytest
 from prometheus_client.registry import CollectorRegistry
 
-import overseer.http
-from overseer.exposition import FleetExposition
-from overseer.fleet_design import aggregated_statuses, initial_levels, leaf_components
-from overseer.http import MAX_CONCURRENT_REQUESTS, MAX_CONNECTIONS, REQUEST_TIMEOUT_SECONDS, OverseerServer
+import overseer.serve.http
 from overseer.messages import DiagnosticArray
-from overseer.metrics import FleetCollector
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.http import (
+    MAX_CONCURRENT_REQUESTS,
+    MAX_CONNECTIONS,
+    REQUEST_TIMEOUT_SECONDS,
+    OverseerServer,
+)
+from overseer.serve.metrics import FleetCollector
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.scrapes import Scrape, parse_scrape
 
@@ -225,7 +230,7 @@ def in_process_server(robots: int) -> Iterator[OverseerServer]:
 def test_a_client_that_never_reads_its_answer_is_cut_off_at_the_deadline(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(overseer.http, "REQUEST_TIMEOUT_SECONDS", 1.0)
+    monkeypatch.setattr(overseer.serve.http, "REQUEST_TIMEOUT_SECONDS", 1.0)
     with in_process_server(robots=3000) as server, socket.socket() as sock:  # about 24 MB of /metrics
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         sock.connect(server.server_address[:2])

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from overseer.check import LONG_OPTIONS
+from overseer.check.plugin import LONG_OPTIONS
 from support.icinga2 import Icinga2, icinga2, running_icinga2, write_icinga2_config
 from support.nagios import CASES, CheckCase, PluginResult, assert_matches_golden, running_fleet
 from support.ports import fresh_domain_id

@@ -12,8 +12,8 @@ from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.metrics import FleetCollector, numeric_value
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.metrics import FleetCollector, numeric_value
 
 GOLDEN = Path(__file__).parent / "golden" / "metrics.txt"
 CONTRACT = {

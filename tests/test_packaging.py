@@ -66,7 +66,7 @@ def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_dock
     with zipfile.ZipFile(wheel) as archive:
         names = set(archive.namelist())
         entry_points = next(archive.read(n).decode() for n in names if n.endswith("entry_points.txt"))
-    assert "overseer/web/index.html" in names
+    assert "overseer/serve/status_page/index.html" in names
     assert "overseer/py.typed" in names
     assert re.search(r"^overseer = overseer\.cli:main$", entry_points, re.M)
     assert "overseer-0.1.0.data/scripts/check_ros_diagnostics" in names

@@ -9,14 +9,14 @@ from typing import Any
 
 import pytest
 
-from overseer.codec.ros1 import encode_diagnostic_array
-from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.ros1_direct import (
+from overseer.check.ros1_direct import (
     MasterUnreachableError,
     MessageTimeoutError,
     NoPublisherError,
     read_robot_document,
 )
+from overseer.codec.ros1 import encode_diagnostic_array
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support.nagios import run_check
 from support.ports import free_port
 from support.processes import running_exporter, wait_for

@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 import yaml
 
-from overseer.api import robot_document
 from overseer.codec.ros1 import encode_diagnostic_array
 from overseer.config import Ros1Config, Ros1Robot
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.api import robot_document
 from overseer.sources import ros1 as ros1_source
 from overseer.sources.ros1 import Ros1Source
 from overseer.sources.ros1_tcpros import (

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from overseer.config import ConfigError, parse_shard
-from overseer.shard import Shard
+from overseer.model.shard import Shard
 from support.processes import running_exporter, running_simulator, wait_for
 
 

@@ -25,7 +25,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.check import main as check_main
 from overseer.config import ConfigError
-from overseer.web_config import BasicAuth, load_web_config
+from overseer.serve.web_config import BasicAuth, load_web_config
 from support.nagios import run_check
 from support.ports import free_port, fresh_domain_id
 from support.processes import Exporter, overseer_command, running_simulator, spawn, wait_for

@@ -9,12 +9,12 @@ from dataclasses import dataclass, field, replace
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.config import Config
-from overseer.exposition import FleetExposition
-from overseer.http import OverseerServer
-from overseer.metrics import FleetCollector
 from overseer.model import FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.http import OverseerServer
+from overseer.serve.metrics import FleetCollector
+from overseer.serve.web_config import load_web_config
 from overseer.sources import Source
-from overseer.web_config import load_web_config
 
 log = logging.getLogger(__name__)
 

@@ -219,7 +219,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _simulator_settings(args: argparse.Namespace) -> Any:
-    from overseer.simulate import EventError, SimulatorSettings, parse_event
+    from overseer.simulator.publisher import EventError, SimulatorSettings, parse_event
 
     try:
         events = [parse_event(text) for text in args.event]
@@ -259,7 +259,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
 def _simulate(args: argparse.Namespace) -> int:
     settings = _simulator_settings(args)
     _configure_logging(args.log_level)
-    from overseer.simulate import EventError, FleetSimulator
+    from overseer.simulator.publisher import EventError, FleetSimulator
 
     try:
         simulator = FleetSimulator(settings)
@@ -289,7 +289,7 @@ def _demo(args: argparse.Namespace) -> int:
     )
     _configure_logging(config.log_level)
     from overseer.app import Exporter
-    from overseer.simulate import FleetSimulator, SimulatorSettings, parse_event
+    from overseer.simulator.publisher import FleetSimulator, SimulatorSettings, parse_event
 
     exporter = Exporter(config)
     exporter.start()

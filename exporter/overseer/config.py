@@ -13,7 +13,7 @@ from typing import Any
 import yaml
 
 from overseer.model import FleetLimits
-from overseer.shard import Shard
+from overseer.model.shard import Shard
 
 DEFAULT_PORT = 9849
 DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")

@@ -25,7 +25,7 @@ from cyclonedds.util import duration
 from overseer.codec import DecodeError, cdr
 from overseer.config import DdsConfig, DomainConfig
 from overseer.model import FleetModel
-from overseer.shard import Shard
+from overseer.model.shard import Shard
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.cyclone_log import CycloneWarnings
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray

@@ -20,9 +20,9 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.topic import Topic
 
 from overseer.codec.cdr import encode_diagnostic_array
-from overseer.fleet_design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.simulator.design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
 from overseer.sources.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds import ROS_DEFAULT_QOS
 from overseer.sources.dds_types import DiagnosticArray as DdsDiagnosticArray

@@ -19,8 +19,8 @@ from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
 from overseer.levels import Level, worst
-from overseer.metrics import DROP_REASONS, NumericValues, _Families, message_counts
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
+from overseer.serve.metrics import DROP_REASONS, NumericValues, _Families, message_counts
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 

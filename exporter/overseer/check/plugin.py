@@ -1,7 +1,7 @@
 """check_ros_diagnostics: a Monitoring Plugins check of one robot, read from the exporter's JSON API.
 
 It starts once per check, so it imports only cheap standard modules (no argparse or getopt, not even
-__future__; a socket rather than urllib: see check_http.py) and none of the exporter; bench/bench_check.py
+__future__; a socket rather than urllib: see http_client.py) and none of the exporter; bench/bench_check.py
 measures it.
 """
 
@@ -10,9 +10,10 @@ from __future__ import annotations
 import os
 import sys
 
-from overseer import __version__, check_json
-from overseer.check_http import Answer, Tls, get, parse_url, quote_path
-from overseer.check_report import (
+from overseer import __version__
+from overseer.check import api_reader
+from overseer.check.http_client import Answer, Tls, get, parse_url, quote_path
+from overseer.check.report import (
     CRITICAL,
     UNKNOWN,
     WARNING,
@@ -346,7 +347,7 @@ def check(options: Options) -> tuple[int, str]:
     answer = get(url, options.timeout, options.authorization, options.tls)
     check_status(answer, url, options)
     try:
-        document = check_json.loads(answer.body)
+        document = api_reader.loads(answer.body)
     except ValueError as error:
         raise CheckError(f"malformed JSON from {url}: {error}") from None
     try:
@@ -361,7 +362,7 @@ def check(options: Options) -> tuple[int, str]:
 
 def read_from_master(options: Options) -> dict[str, object]:
     """The robot's API document built from one message read directly from its ROS 1 master."""
-    from overseer.ros1_direct import Ros1DirectError, read_robot_document  # only this mode pays for it
+    from overseer.check.ros1_direct import Ros1DirectError, read_robot_document  # only this mode pays for it
 
     try:
         return read_robot_document(
@@ -388,7 +389,7 @@ def check_status(answer: Answer, url: str, options: Options) -> None:
 def is_exporter_error(body: bytes) -> bool:
     """Whether `body` is the exporter's JSON error document ({"error": ...})."""
     try:
-        document = check_json.loads(body)
+        document = api_reader.loads(body)
     except ValueError:
         return False
     return isinstance(document, dict) and "error" in document

@@ -15,11 +15,11 @@ import threading
 import time
 from typing import Any
 
-from overseer.api import robot_document
 from overseer.codec import DecodeError
 from overseer.codec.ros1 import decode_diagnostic_array
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.api import robot_document
 from overseer.sources.ros1_tcpros import TcprosError, read_frame, subscribe
 from overseer.sources.ros1_xmlrpc import CALL_TIMEOUT_SECONDS, RosApiError, request_topic, topic_publishers
 

@@ -1,9 +1,8 @@
 """The live fleet model: robot → component → level, message, hardware_id, key-values, last update.
 
 Writers (the transports) call `apply` with decoded arrays; readers (the views) take a `FleetSnapshot`.
-Robot states are immutable and replaced whole on every message, so a snapshot is a shallow copy taken
-under the one lock, and views read it with no lock held. Staleness and robot up/down are derived from
-the snapshot's time, never stored, so they cannot drift from the clock.
+Robot states are replaced whole on every message, so a snapshot is a shallow copy taken under the one
+lock, and views read it with no lock held.
 """
 
 from __future__ import annotations
@@ -12,83 +11,16 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable
 from types import MappingProxyType
 from typing import NamedTuple
 
-from overseer.levels import Level, worst
+from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model.snapshot import FleetSnapshot
+from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
 
-ComponentKey = tuple[str, str]  # (name, hardware_id)
 _LEVELS = tuple(Level)  # by wire value, faster than calling the enum
-
-
-@dataclass(frozen=True)
-class FleetLimits:
-    """Time limits and caps that bound what the model keeps."""
-
-    stale_after: float = 5.0
-    robot_timeout: float = 10.0
-    expire_after: float = 3600.0
-    max_robots: int = 10_000
-    max_components_per_robot: int = 1_000
-    max_values_per_component: int = 64
-    max_string_length: int = 1_024
-
-
-class Component(NamedTuple):
-    """The last status a component reported; `level` is the reported level, before staleness.
-
-    `last_update` is when it was last reported in a message other than its robot's latest one; while it
-    is in the latest message, `FleetSnapshot.last_update` gives that message's time instead. This lets
-    an unchanged message refresh a whole robot by replacing one `RobotState`. A named tuple, not a frozen
-    dataclass: it is built for every status that changed, and a frozen dataclass is four times slower
-    to build. `key` is the very tuple that keys it in its robot's components (and in `latest`).
-    """
-
-    key: ComponentKey
-    level: Level
-    message: str
-    values: tuple[tuple[str, str], ...]
-    last_update: float
-    level_changes: int
-    topic: str
-
-    @property
-    def name(self) -> str:
-        """The status's name."""
-        return self.key[0]
-
-    @property
-    def hardware_id(self) -> str:
-        """The status's hardware_id."""
-        return self.key[1]
-
-
-@dataclass(frozen=True, slots=True)
-class RobotState:
-    """One robot as last seen; replaced whole, never mutated.
-
-    `latest` holds, in the message's order, the component each status of the latest message went to,
-    or None where the status lost something (dropped, cut short, or a repeated name): an ingest may
-    then apply only the statuses that changed (`FleetModel.apply_changes`). `missing` holds the
-    components absent from the latest message; it is empty for almost every robot, so it is shared.
-    """
-
-    name: str
-    transport: str
-    last_message: float | None
-    components: Mapping[ComponentKey, Component]
-    discovered_at: float
-    revision: int = 0
-    latest: tuple[ComponentKey | None, ...] = ()
-    missing: frozenset[ComponentKey] = frozenset()
-
-    @property
-    def last_seen(self) -> float:
-        """When the robot last sent a message, or when it was discovered if it never did."""
-        return self.discovered_at if self.last_message is None else self.last_message
 
 
 class Applied(NamedTuple):
@@ -96,74 +28,6 @@ class Applied(NamedTuple):
 
     complete: bool
     revision: int | None  # None when the robot was refused (the robot cap)
-
-
-@dataclass(frozen=True)
-class FleetSnapshot:
-    """An immutable view of the fleet at `taken_at`, with the judgements that depend on time."""
-
-    taken_at: float
-    limits: FleetLimits
-    robots: tuple[RobotState, ...]
-    message_counts: Mapping[tuple[str, str], int] = field(default_factory=dict)
-    dropped_statuses: Mapping[str, int] = field(default_factory=dict)
-    truncated_strings: int = 0
-    source_errors: Mapping[tuple[str, str], int] = field(default_factory=dict)
-
-    def robot_up(self, robot: RobotState) -> bool:
-        """True while the robot's messages arrive within `robot_timeout`."""
-        return (
-            robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
-        )
-
-    @staticmethod
-    def last_update(robot: RobotState, key: ComponentKey, component: Component) -> float:
-        """When the component was last reported."""
-        if robot.last_message is not None and key not in robot.missing:
-            return robot.last_message
-        return component.last_update
-
-    def component_level(
-        self, robot: RobotState, key: ComponentKey, component: Component, robot_up: bool
-    ) -> Level:
-        """The component's level now: STALE when not updated for `stale_after` or its robot is down."""
-        if not robot_up or not self.fresh(self.last_update(robot, key, component)):
-            return Level.STALE
-        return component.level
-
-    def fresh(self, updated: float | None) -> bool:
-        """True when something updated at `updated` (None: never) is within `stale_after` of now."""
-        return updated is not None and self.taken_at - updated <= self.limits.stale_after
-
-    def component_levels(self, robot: RobotState, robot_up: bool) -> list[Level]:
-        """Every component's level now, in the order of `robot.components` (as `component_level`)."""
-        if not robot_up:
-            return [Level.STALE] * len(robot.components)
-        fresh = self.fresh(robot.last_message)
-        missing = robot.missing
-        if not missing:  # almost always: every level follows from the latest message's time
-            if fresh:
-                return [component.level for component in robot.components.values()]
-            return [Level.STALE] * len(robot.components)
-        return [
-            self.component_level(robot, key, component, True)
-            if key in missing
-            else (component.level if fresh else Level.STALE)
-            for key, component in robot.components.items()
-        ]
-
-    def robot_level(self, robot: RobotState) -> Level:
-        """The robot's worst component level by severity order (STALE when the robot is down)."""
-        if not self.robot_up(robot):
-            return Level.STALE
-        return worst(self.component_levels(robot, True))
-
-    def find(self, name: str) -> RobotState | None:
-        """The robot called `name`, or None."""
-        for robot in self.robots:
-            if robot.name == name:
-                return robot
-        return None
 
 
 class FleetModel:

@@ -27,11 +27,11 @@ from urllib.parse import unquote, urlsplit
 from prometheus_client.exposition import choose_encoder
 from prometheus_client.registry import CollectorRegistry
 
-from overseer.api import robot_document, robots_document
-from overseer.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
-from overseer.exposition import FleetExposition
 from overseer.model import FleetModel
-from overseer.web_config import REALM, WebSecurity
+from overseer.serve.api import robot_document, robots_document
+from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.web_config import REALM, WebSecurity
 
 if TYPE_CHECKING:
     from _typeshed import ReadableBuffer, WriteableBuffer
@@ -73,7 +73,7 @@ class OverseerServer(ThreadingHTTPServer):
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
-        self.status_page = resources.files("overseer.web").joinpath("index.html").read_bytes()
+        self.status_page = resources.files("overseer.serve.status_page").joinpath("index.html").read_bytes()
         super().__init__(address, _Handler)
 
     @property

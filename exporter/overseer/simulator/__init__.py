@@ -1,0 +1,1 @@
+"""The paper's virtual robots: a fleet publishing real diagnostics traffic for demos, tests and benchmarks."""
