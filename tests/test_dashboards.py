@@ -24,8 +24,8 @@ from support.prometheus import REPO, Prometheus, load_rules, running_prometheus,
 DASHBOARDS = REPO / "dashboards"
 DASHBOARD_FILES = sorted(DASHBOARDS.glob("*.json"))
 PROVISIONING = DASHBOARDS / "provisioning"
-# CI checks the repository out next to the shared directory that holds Grafana's dashboard schema.
-SCHEMA = REPO.parent / "shared" / "grafana" / "dashboard.schema.json"
+# Grafana's dashboard JSON Schema, kept in the repository (tests/schemas/README.md says where it is from).
+SCHEMA = REPO / "tests" / "schemas" / "grafana-dashboard.schema.json"
 # Keys Grafana adds to an exported dashboard for importing it; they are not part of the dashboard model.
 EXPORT_ONLY_KEYS = ("__inputs", "__elements", "__requires")
 
