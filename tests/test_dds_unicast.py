@@ -207,7 +207,7 @@ def test_with_a_peer_the_robots_of_two_processes_on_that_host_are_heard(
         assert_multicast_off(link)
         for name in ("alpha1", "beta1"):
             wait_for(
-                lambda name=name: heard(exporter, name),  # type: ignore[misc]
+                lambda name=name: heard(exporter, name),
                 DISCOVERY_TIMEOUT,
                 message=f"{name} on /metrics ({exporter.log_path})",
             )
