@@ -97,6 +97,11 @@ def test_flags_replace_the_files_peers(tmp_path: Path) -> None:
             "dds.peers[0]: expected a port from 1 to 65535 after the host, got '::1'",
         ),
         (
+            {"loopback_only": True, "peers": ["127.bots.ex"]},
+            "dds.peers[0]: '127.bots.ex' is not a loopback address, but dds.loopback_only keeps DDS "
+            "on loopback",
+        ),
+        (
             {"loopback_only": True, "peers": ["127.0.0.1", "10.0.0.5"]},
             "dds.peers[1]: '10.0.0.5' is not a loopback address, but dds.loopback_only keeps DDS on loopback",
         ),

@@ -52,7 +52,9 @@ class DdsPeer:
     @property
     def is_loopback(self) -> bool:
         """True for `localhost` and 127.0.0.0/8."""
-        return self.host == "localhost" or self.host.startswith("127.")
+        return self.host == "localhost" or (
+            _IPV4.fullmatch(self.host) is not None and self.host.startswith("127.")
+        )
 
 
 @dataclass(frozen=True)
