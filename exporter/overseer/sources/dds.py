@@ -108,7 +108,10 @@ class DdsSource:
         max_index = self._config.max_participant_index
         if self._config.loopback_only:
             max_index = max(max_index, LOOPBACK_MAX_PARTICIPANTS)
-        return peers_config(peer_addresses(self._config.peers, self._count_unresolved_peer), max_index)
+        addresses = peer_addresses(self._config.peers, self._count_unresolved_peer)
+        if addresses:
+            log.info("DDS discovery also goes to %s (indices 0-%d)", ", ".join(addresses), max_index)
+        return peers_config(addresses, max_index)
 
     def _count_unresolved_peer(self, peer: DdsPeer, error: str) -> None:
         self._model.count_source_error(TRANSPORT, "peer_unresolved")
