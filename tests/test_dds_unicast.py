@@ -19,6 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from fastdds_build import build_fastdds_publisher
 from overseer.levels import Level
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.netns import VethNamespace, veth_namespace
@@ -33,6 +34,7 @@ from support.processes import (
 )
 
 COMPONENTS = 10
+FASTDDS_BUILD_DIR = Path(__file__).resolve().parents[1] / ".cache" / "fastdds-build"
 QUIET_WINDOW = 8.0  # seconds in which nothing may be heard without peers
 DISCOVERY_TIMEOUT = 30.0
 
@@ -274,3 +276,33 @@ def test_a_robot_that_starts_after_cyclones_peer_timeout_is_still_found(
                 DISCOVERY_TIMEOUT,
                 message=f"alpha1 on /metrics ({alpha.log_path}, {exporter.log_path})",
             )
+
+
+def test_with_a_peer_a_fast_dds_robot_is_heard(tmp_path: Path, dds_domain: int) -> None:
+    """A Fast DDS process (as rmw_fastrtps_cpp) takes participant id 0, whose port the peer probe reaches."""
+    publisher = build_fastdds_publisher(FASTDDS_BUILD_DIR)
+    args = [
+        str(publisher),
+        "--domain",
+        str(dds_domain),
+        "--topic",
+        "rt/fastbot/diagnostics_agg",
+        "--rate",
+        "4",
+    ]
+    args += ["--status", "2|/Laser|No scans|laser1|", "--status", "1|/Power|Low charge|bms|voltage=11.1"]
+    with veth_namespace(multicast=False) as link:
+        args += ["--interface", link.inside_address]
+        robot = RunningProcess(spawn(link.command(args), tmp_path / "fastdds.log"), tmp_path / "fastdds.log")
+        try:
+            wait_for_participants(link, dds_domain, [0])
+            with exporter_on_host(
+                tmp_path, link, dds_domain, f"--dds.peer={link.inside_address}"
+            ) as exporter:
+                wait_for(
+                    lambda: levels_on_metrics(exporter, "fastbot") == {"/Laser": 2.0, "/Power": 1.0},
+                    DISCOVERY_TIMEOUT,
+                    message=f"fastbot on /metrics ({robot.log_path}, {exporter.log_path})",
+                )
+        finally:
+            robot.stop()
