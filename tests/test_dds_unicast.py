@@ -8,7 +8,8 @@ exporter unless a test says so. The exporter runs on the host, its DDS held to t
 an operator's `--dds.cyclonedds-uri` that names that interface (as on a server with several interfaces):
 not the loopback-only configuration, whose peer 127.0.0.1 would find anything on this machine. Cyclone
 sees no multicast-capable interface on either side, so the only way across is unicast to a named peer.
-Each test has a DDS domain of its own, and the namespace and its veth pair are deleted when it ends.
+The Fast DDS publisher of tests/fastdds stands in for a robot on rmw_fastrtps_cpp. Each test has a DDS
+domain of its own, and the namespace and its veth pair are deleted when it ends.
 """
 
 from __future__ import annotations
