@@ -8,6 +8,8 @@ exporter unless a test says so. The exporter runs on the host, its DDS held to t
 an operator's `--dds.cyclonedds-uri` that names that interface (as on a server with several interfaces):
 not the loopback-only configuration, whose peer 127.0.0.1 would find anything on this machine. Cyclone
 sees no multicast-capable interface on either side, so the only way across is unicast to a named peer.
+(The flag off on loopback alone would not do: Cyclone still multicasts over `lo` and Linux delivers it,
+so exporter and robots sharing one namespace would find each other; hence two hosts joined by a veth.)
 The Fast DDS publisher of tests/fastdds stands in for a robot on rmw_fastrtps_cpp. Each test has a DDS
 domain of its own, and the namespace and its veth pair are deleted when it ends.
 """
