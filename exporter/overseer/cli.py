@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from overseer import __version__
-from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_duration
+from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_dds_peer, parse_duration
 
 log = logging.getLogger("overseer")
 
@@ -104,6 +104,20 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help="Cyclone DDS configuration (XML or file://)",
     )
     parser.add_argument(
+        "--dds.peer",
+        dest="dds_peers",
+        action="append",
+        metavar="HOST[:PORT]",
+        help="send DDS discovery to this host directly (networks without multicast); repeat for several",
+    )
+    parser.add_argument(
+        "--dds.max-participant-index",
+        dest="max_participant_index",
+        type=int,
+        metavar="N",
+        help="probe participant indices 0..N (DDS processes) on each peer without a port (default 32)",
+    )
+    parser.add_argument(
         "--ros1.robot",
         dest="ros1_robots",
         action="append",
@@ -137,6 +151,14 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--topic", choices=["diagnostics_agg", "diagnostics"], default="diagnostics_agg")
     parser.add_argument("--dds.loopback-only", dest="loopback_only", action="store_true")
     parser.add_argument(
+        "--dds.peer",
+        dest="dds_peers",
+        action="append",
+        default=[],
+        metavar="HOST[:PORT]",
+        help="send DDS discovery to this host directly, e.g. the exporter's (networks without multicast)",
+    )
+    parser.add_argument(
         "--vary-values", action="store_true", help="change each robot's battery voltage at every publication"
     )
     parser.add_argument(
@@ -169,6 +191,10 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["dds.loopback_only"] = True
     if args.cyclonedds_uri:
         overrides["dds.cyclonedds_uri"] = args.cyclonedds_uri
+    if args.dds_peers:
+        overrides["dds.peers"] = list(args.dds_peers)
+    if args.max_participant_index is not None:
+        overrides["dds.max_participant_index"] = args.max_participant_index
     if args.ros1_robots:
         robots = []
         for text in args.ros1_robots:
@@ -239,6 +265,9 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         )
     if not args.rate > 0:
         raise ConfigError(f"--rate: must be positive, got {args.rate}")
+    peers = tuple(parse_dds_peer(text, "--dds.peer") for text in args.dds_peers)
+    if args.loopback_only and not all(peer.is_loopback for peer in peers):
+        raise ConfigError("--dds.peer: only loopback peers go with --dds.loopback-only")
     return SimulatorSettings(
         robots=args.robots,
         components=args.components,
@@ -250,6 +279,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         namespace_prefix=args.namespace_prefix,
         topic=args.topic,
         loopback_only=args.loopback_only,
+        peers=peers,
         vary_values=args.vary_values,
         wait_for_subscribers=args.wait_for_subscribers,
         events=events,

@@ -17,6 +17,9 @@ from overseer.model.shard import Shard
 
 DEFAULT_PORT = 9849
 DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")
+# rmw_cyclonedds (Iron and later) lets a robot's DDS processes take participant indices 0..32.
+DEFAULT_MAX_PARTICIPANT_INDEX = 32
+MAX_PARTICIPANT_INDEX_LIMIT = 119
 
 
 class ConfigError(ValueError):
@@ -37,6 +40,24 @@ class DomainConfig:
 
 
 @dataclass(frozen=True)
+class DdsPeer:
+    """A host DDS discovery is sent to directly; with no `port`, every participant index's port on it."""
+
+    host: str
+    port: int | None = None
+
+    def __str__(self) -> str:
+        return self.host if self.port is None else f"{self.host}:{self.port}"
+
+    @property
+    def is_loopback(self) -> bool:
+        """True for `localhost` and 127.0.0.0/8."""
+        return self.host == "localhost" or (
+            _IPV4.fullmatch(self.host) is not None and self.host.startswith("127.")
+        )
+
+
+@dataclass(frozen=True)
 class DdsConfig:
     """The ROS 2 / DDS transport."""
 
@@ -46,6 +67,8 @@ class DdsConfig:
     prefer_aggregated: bool = True
     loopback_only: bool = False
     cyclonedds_uri: str | None = None
+    peers: tuple[DdsPeer, ...] = ()
+    max_participant_index: int = DEFAULT_MAX_PARTICIPANT_INDEX
 
 
 @dataclass(frozen=True)
@@ -148,6 +171,31 @@ def parse_shard(value: object, key: str = "shard") -> Shard:
     return Shard(int(match.group(1)), int(match.group(2)))
 
 
+_HOST_LABEL = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)")
+_IPV4 = re.compile(r"(\d{1,3})\.(\d{1,3})\.(\d{1,3})\.(\d{1,3})")
+
+
+def parse_dds_peer(value: object, key: str) -> DdsPeer:
+    """A `DdsPeer` from `HOST` or `HOST:PORT`; HOST is an IPv4 address or a DNS name."""
+    if not isinstance(value, str):
+        raise ConfigError(f"{key}: expected HOST or HOST:PORT, got {value!r}")
+    host, sep, port_text = value.partition(":")
+    port: int | None = None
+    if sep:
+        if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
+            raise ConfigError(f"{key}: expected a port from 1 to 65535 after the host, got {value!r}")
+        port = int(port_text)
+    ipv4 = _IPV4.fullmatch(host)
+    if ipv4 is not None:
+        if any(int(part) > 255 for part in ipv4.groups()):
+            raise ConfigError(f"{key}: {host!r} is not an IPv4 address, in {value!r}")
+    elif len(host) > 253 or not all(_HOST_LABEL.fullmatch(label) for label in host.split(".")):
+        raise ConfigError(
+            f"{key}: expected HOST or HOST:PORT with an IPv4 address or a host name, got {value!r}"
+        )
+    return DdsPeer(host, port)
+
+
 def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
     """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags."""
     raw: dict[str, Any] = {}
@@ -227,6 +275,16 @@ def _dds_config(raw: dict[str, Any]) -> DdsConfig:
             if topic not in DIAGNOSTIC_TOPICS:
                 raise ConfigError(f"dds.topics: expected diagnostics_agg or diagnostics, got {topic!r}")
     uri = raw.get("cyclonedds_uri")
+    loopback_only = _bool(raw.get("loopback_only", defaults.loopback_only), "dds.loopback_only")
+    peers = _dds_peers([] if raw.get("peers") is None else raw["peers"], loopback_only)
+    max_index = _max_participant_index(raw.get("max_participant_index", defaults.max_participant_index))
+    for domain in domains if peers else ():
+        highest_port = 7400 + 250 * domain.id + 11 + 2 * max_index  # unicast data port of the last index
+        if highest_port > 65535:
+            raise ConfigError(
+                f"dds.max_participant_index: {max_index} needs port {highest_port} on domain {domain.id}, "
+                "above 65535"
+            )
     return DdsConfig(
         enabled=_bool(raw.get("enabled", defaults.enabled), "dds.enabled"),
         domains=domains,
@@ -234,9 +292,32 @@ def _dds_config(raw: dict[str, Any]) -> DdsConfig:
         prefer_aggregated=_bool(
             raw.get("prefer_aggregated", defaults.prefer_aggregated), "dds.prefer_aggregated"
         ),
-        loopback_only=_bool(raw.get("loopback_only", defaults.loopback_only), "dds.loopback_only"),
+        loopback_only=loopback_only,
         cyclonedds_uri=None if uri is None else _string(uri, "dds.cyclonedds_uri"),
+        peers=peers,
+        max_participant_index=max_index,
     )
+
+
+def _dds_peers(items: object, loopback_only: bool) -> tuple[DdsPeer, ...]:
+    peers = tuple(parse_dds_peer(item, f"dds.peers[{i}]") for i, item in enumerate(_list(items, "dds.peers")))
+    for i, peer in enumerate(peers):
+        if loopback_only and not peer.is_loopback:
+            raise ConfigError(
+                f"dds.peers[{i}]: {str(peer)!r} is not a loopback address, but dds.loopback_only keeps DDS "
+                "on loopback"
+            )
+    return peers
+
+
+def _max_participant_index(value: object) -> int:
+    # Cyclone 11 never hands out the highest index of its range itself, so 0 would leave the exporter none.
+    if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= MAX_PARTICIPANT_INDEX_LIMIT:
+        raise ConfigError(
+            f"dds.max_participant_index: expected an integer from 1 to {MAX_PARTICIPANT_INDEX_LIMIT}, "
+            f"got {value!r}"
+        )
+    return value
 
 
 def _ros1_config(raw: dict[str, Any]) -> Ros1Config:

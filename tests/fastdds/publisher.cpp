@@ -19,6 +19,10 @@
 // (e.g. 00ff) makes it discard the whole RTPS message, which stalls the reliable
 // stream until the sample leaves this writer's history (KEEP_LAST 10).
 //
+// With --interface ADDRESS, DDS runs on that IPv4 address only with Fast DDS's default
+// discovery (the multicast initial peer), as on a robot of a network without multicast;
+// without it, on 127.0.0.1 with unicast discovery.
+//
 // Prints "ready" once the writer exists and "matched N" whenever the number of
 // matched readers changes. Runs until N samples are sent (0 = forever, the
 // default), or SIGINT/SIGTERM.
@@ -230,6 +234,7 @@ struct Options {
     long count = 0;  // 0 = forever
     std::vector<diag::DiagnosticStatus_> statuses;
     std::vector<RawPayload> raw_payloads;
+    std::string interface;  // empty: loopback
 };
 
 Options parse_args(int argc, char** argv)
@@ -253,6 +258,8 @@ Options parse_args(int argc, char** argv)
             opt.statuses.push_back(parse_status(value));
         } else if (arg == "--raw-hex") {
             opt.raw_payloads.push_back(parse_hex(value));
+        } else if (arg == "--interface") {
+            opt.interface = value;
         } else {
             throw std::invalid_argument("unknown argument: " + arg);
         }
@@ -293,6 +300,17 @@ DomainParticipantQos loopback_participant_qos()
     return qos;
 }
 
+DomainParticipantQos interface_participant_qos(const std::string& address)
+{
+    DomainParticipantQos qos;
+    qos.name("overseer_test_publisher");
+    qos.transport().use_builtin_transports = false;
+    auto udp = std::make_shared<UDPv4TransportDescriptor>();
+    udp->interfaceWhiteList.emplace_back(address);
+    qos.transport().user_transports.push_back(udp);
+    return qos;
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -310,7 +328,8 @@ int main(int argc, char** argv)
     std::signal(SIGTERM, on_signal);
 
     auto* factory = DomainParticipantFactory::get_instance();
-    DomainParticipant* participant = factory->create_participant(opt.domain, loopback_participant_qos());
+    DomainParticipant* participant = factory->create_participant(
+        opt.domain, opt.interface.empty() ? loopback_participant_qos() : interface_participant_qos(opt.interface));
     if (participant == nullptr) {
         std::cerr << "publisher: cannot create participant\n";
         return 1;

@@ -47,8 +47,12 @@ class VethNamespace:
 
 
 @contextmanager
-def veth_namespace() -> Iterator[VethNamespace]:
-    """A fresh namespace with a veth pair to the host, both ends up and addressed; always removed."""
+def veth_namespace(multicast: bool = True) -> Iterator[VethNamespace]:
+    """A fresh namespace with a veth pair to the host, both ends up and addressed; always removed.
+
+    With `multicast` false, both ends of the pair and the namespace's loopback lose the MULTICAST flag,
+    as on a network that carries no multicast: DDS can then discover only by unicast.
+    """
     number = next(_counter)
     tag = f"{os.getpid() % 100_000}{number}"
     subnet = (os.getpid() * 7 + number) % 250 + 1
@@ -65,6 +69,10 @@ def veth_namespace() -> Iterator[VethNamespace]:
         ip(*inside, "addr", "add", f"{namespace.inside_address}/30", "dev", namespace.inside)
         ip(*inside, "link", "set", namespace.inside, "up")
         ip(*inside, "link", "set", "lo", "up")
+        if not multicast:
+            ip("link", "set", namespace.outside, "multicast", "off")
+            ip(*inside, "link", "set", namespace.inside, "multicast", "off")
+            ip(*inside, "link", "set", "lo", "multicast", "off")
         yield namespace
     finally:
         subprocess.run(["ip", "link", "del", namespace.outside], capture_output=True, timeout=30)

@@ -9,6 +9,7 @@ and restart a robot at given times, for tests and demos.
 from __future__ import annotations
 
 import logging
+import os
 import struct
 import threading
 import time
@@ -20,11 +21,18 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.topic import Topic
 
 from overseer.codec.cdr import encode_diagnostic_array
+from overseer.config import DEFAULT_MAX_PARTICIPANT_INDEX, DdsPeer
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.simulator.design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
-from overseer.sources.cyclone_config import configure_domain, loopback_only_config
+from overseer.sources.cyclone_config import (
+    LOOPBACK_MAX_PARTICIPANTS,
+    configure_domain,
+    loopback_only_config,
+    peers_config,
+)
 from overseer.sources.dds import ROS_DEFAULT_QOS
+from overseer.sources.dds_peers import peer_addresses
 from overseer.sources.dds_types import DiagnosticArray as DdsDiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, dds_topic_name
 
@@ -104,6 +112,7 @@ class SimulatorSettings:
     namespace_prefix: str = "robot"
     topic: str = AGGREGATED
     loopback_only: bool = False
+    peers: tuple[DdsPeer, ...] = ()  # hosts to announce the robots to directly, e.g. the exporter's
     vary_values: bool = False
     wait_for_subscribers: float = 0.0  # seconds to wait until every writer has a matched reader
     events: list[Event] = field(default_factory=list)
@@ -249,7 +258,16 @@ class FleetSimulator:
 
     def _participant(self, domain_id: int) -> DomainParticipant:
         if domain_id not in self._participants:
-            if self.settings.loopback_only:
-                configure_domain(domain_id, loopback_only_config(), keep_existing=True)
+            if self.settings.loopback_only or self.settings.peers:
+                configure_domain(domain_id, self._cyclone_config(), keep_existing=True)
             self._participants[domain_id] = DomainParticipant(domain_id)
         return self._participants[domain_id]
+
+    def _cyclone_config(self) -> str:
+        loopback = self.settings.loopback_only
+        base = loopback_only_config() if loopback else os.environ.get("CYCLONEDDS_URI", "")
+        addresses = peer_addresses(
+            self.settings.peers, lambda peer, error: log.warning("DDS peer %s left out: %s", peer, error)
+        )
+        max_index = LOOPBACK_MAX_PARTICIPANTS if loopback else DEFAULT_MAX_PARTICIPANT_INDEX
+        return ",".join(fragment for fragment in (base, peers_config(addresses, max_index)) if fragment)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 
 from cyclonedds.domain import Domain
 
@@ -28,6 +29,26 @@ def loopback_only_config() -> str:
         # Key hashes let Fast DDS writers notice at once when our readers leave.
         "<Internal><GenerateKeyhash>true</GenerateKeyhash></Internal>"
         "</Domain></CycloneDDS>"
+    )
+
+
+def peers_config(addresses: Sequence[str], max_participant_index: int) -> str:
+    """A Cyclone DDS fragment sending discovery to `addresses` (`IP` or `IP:PORT`) for as long as we run.
+
+    An address without a port is probed at the discovery port of every participant index from 0 to
+    `max_participant_index`, since Cyclone and Fast DDS give each DDS process on a host an index of its
+    own, lowest free first. Cyclone stops probing a configured peer that has not answered within 30 s
+    (InitialLocatorPruneDelay); robots boot after the exporter and WiFi drops out, so these peers are
+    kept for good. With peers configured, Cyclone takes a participant index itself, so a robot that
+    lists this host as its peer finds it too. Empty when there are no addresses.
+    """
+    if not addresses:
+        return ""
+    peers = "".join(f'<Peer address="{address}" PruneDelay="inf"/>' for address in addresses)
+    return (
+        '<CycloneDDS><Domain id="any"><Discovery>'
+        f"<MaxAutoParticipantIndex>{max_participant_index}</MaxAutoParticipantIndex>"
+        f"<Peers>{peers}</Peers></Discovery></Domain></CycloneDDS>"
     )
 
 

@@ -23,11 +23,17 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from overseer.codec import DecodeError, cdr
-from overseer.config import DdsConfig, DomainConfig
+from overseer.config import DdsConfig, DdsPeer, DomainConfig
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.cyclone_config import configure_domain, loopback_only_config
+from overseer.sources.cyclone_config import (
+    LOOPBACK_MAX_PARTICIPANTS,
+    configure_domain,
+    loopback_only_config,
+    peers_config,
+)
 from overseer.sources.cyclone_log import CycloneWarnings
+from overseer.sources.dds_peers import peer_addresses
 from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.ingest import PayloadIngest
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
@@ -76,8 +82,9 @@ class DdsSource:
         """Join every configured domain and start discovering robots."""
         warnings = CycloneWarnings(self._count_dropped_sample)
         base = loopback_only_config() if self._config.loopback_only else self._config.cyclonedds_uri
-        # An explicit configuration replaces CYCLONEDDS_URI, so the operator's one is kept in front.
-        fragments = [base or os.environ.get("CYCLONEDDS_URI", ""), warnings.config()]
+        # An explicit configuration replaces CYCLONEDDS_URI, so the operator's one is kept in front;
+        # the peers come after it, adding to any peers it lists.
+        fragments = [base or os.environ.get("CYCLONEDDS_URI", ""), self._peers_config(), warnings.config()]
         config = ",".join(fragment for fragment in fragments if fragment)
         for domain_config in self._config.domains:
             configure_domain(domain_config.id, config)
@@ -96,6 +103,19 @@ class DdsSource:
         if self._thread is not None:
             self._thread.join(timeout=5)
         self._sessions.clear()
+
+    def _peers_config(self) -> str:
+        max_index = self._config.max_participant_index
+        if self._config.loopback_only:
+            max_index = max(max_index, LOOPBACK_MAX_PARTICIPANTS)
+        addresses = peer_addresses(self._config.peers, self._count_unresolved_peer)
+        if addresses:
+            log.info("DDS discovery also goes to %s (indices 0-%d)", ", ".join(addresses), max_index)
+        return peers_config(addresses, max_index)
+
+    def _count_unresolved_peer(self, peer: DdsPeer, error: str) -> None:
+        self._model.count_source_error(TRANSPORT, "peer_unresolved")
+        log.warning("DDS peer %s left out: cannot resolve it (%s)", peer, error)
 
     def _count_dropped_sample(self, warning: str) -> None:
         self._model.count_message(TRANSPORT, "decode_error")
