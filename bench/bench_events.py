@@ -14,6 +14,7 @@ Realistic: 50 level changes a second in the fleet (one component in a thousand),
 
 from __future__ import annotations
 
+import functools
 import gc
 import tempfile
 import time
@@ -120,9 +121,15 @@ def run(
         turns = list(fleets.items())
         for name, fleet in turns if second % 2 else reversed(turns):  # who goes first takes turns too
             started = time.thread_time()
-            fleet.second(lambda robot, s=second: changes(robot, s), silent)
+            fleet.second(functools.partial(_at_second, changes, second), silent)
             used[name] += time.thread_time() - started
     return used
+
+
+def _at_second(
+    changes: Callable[[int, int], list[tuple[int, DiagnosticStatus]]], second: int, robot: int
+) -> list[tuple[int, DiagnosticStatus]]:
+    return changes(robot, second)
 
 
 def realistic_changes(
