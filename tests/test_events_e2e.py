@@ -102,7 +102,7 @@ def test_hostile_names_and_messages_over_dds_come_back_intact(tmp_path: Path, dd
     hostile = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "</script>", "tab\there"]
     statuses = tuple(DiagnosticStatus(2, "/" + text, text, text, ((text, text),)) for text in hostile)
     with (
-        running_exporter(tmp_path, dds_domain, f"--events.path={tmp_path / 'events.db'}") as exporter,
+        running_exporter(tmp_path, dds_domain) as exporter,  # the default database, in its working directory
         raw_diagnostics_writer(dds_domain, "rt/hostile/diagnostics_agg") as writer,
     ):
         writer.wait_for_reader()
@@ -116,6 +116,7 @@ def test_hostile_names_and_messages_over_dds_come_back_intact(tmp_path: Path, dd
             30,
             message="six hostile components",
         )
+    assert (tmp_path / "overseer-events.db").stat().st_size > 0
     got = sorted((e["component"], e["hardware_id"], e["message"], e["values"], e["new_state"]) for e in found)
     want = sorted(("/" + t, t, t, [{"key": t, "value": t}], "ERROR") for t in hostile)
     assert got == want
