@@ -89,7 +89,8 @@ class TransitionDetector:
         if len(seen) > len(snapshot.robots):
             present = {robot.name for robot in snapshot.robots}
             for name in [name for name in seen if name not in present]:
-                del seen[name]
+                if not seen.pop(name).heard:
+                    continue  # discovered but never heard from: it never had an event either
                 events.append(
                     Event(
                         taken_at,

@@ -137,6 +137,7 @@ class EventStore:
         if self._writer is None:
             with self._queue_lock:
                 self._dropped["store_unavailable"] += len(events)
+            self._log(events, None)  # a log shipper still gets them
             return
         with self._queue_lock:
             room = self.settings.queue_limit - self._queued
@@ -292,18 +293,25 @@ class EventStore:
                     len(events),
                 )
             self._last_write_error = time.monotonic()
+            self._log(events, None)
             return 0
         self._writing_ok = True
         with self._queue_lock:
             self._written += len(events)
-        if self.settings.log_events:
-            for offset, event in enumerate(events, start=1):
-                event_log.info("event", extra={"event": event.document(first + offset)})
+        self._log(events, first)
         if self._used_bytes(writer) > self.settings.max_size:
             deleted = self._prune_to_size(writer)
             if deleted:
                 writer.execute("PRAGMA incremental_vacuum")
         return len(events)
+
+    def _log(self, events: list[Event], last_id_before: int | None) -> None:
+        """Log each event as one line when asked to (JSON logs); with ids when they were stored."""
+        if not self.settings.log_events:
+            return
+        for offset, event in enumerate(events, start=1):
+            event_id = None if last_id_before is None else last_id_before + offset
+            event_log.info("event", extra={"event": event.document(event_id)})
 
     def _used_bytes(self, writer: sqlite3.Connection) -> int:
         pages = writer.execute("PRAGMA page_count").fetchone()[0]
