@@ -70,7 +70,7 @@ class FleetExposition:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
         `extra_collectors` (small ones, such as the event history's) are rendered by prometheus-client
-        after the fleet, as a registry holding the fleet's collector and then them renders them.
+        and appended after the fleet: what a registry with the fleet's collector first, then them, renders.
         """
         self._extra = CollectorRegistry(auto_describe=False)
         for collector in extra_collectors:
