@@ -274,7 +274,7 @@ class EventStore:
             for event in events
         ]
         try:
-            writer.execute("BEGIN")
+            writer.execute("BEGIN IMMEDIATE")  # the write lock first: the ids read next stay ours
             first = _sequence(writer) if self.settings.log_events else 0
             writer.executemany(_INSERT, rows)
             writer.execute("COMMIT")
