@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import urllib.error
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
@@ -20,6 +21,7 @@ SCRIPT = (
     "--components=5",
     "--warn=0",
     "--error=0",
+    "--wait-for-subscribers=30",  # the script's clock starts once the exporter listens
     "--event=5:robot1:/Temp/Sensor1:ERROR",
     "--event=7:robot2:stop",
     "--event=13:robot2:start",
@@ -41,61 +43,71 @@ def json_log_lines(exporter: Exporter) -> list[dict[str, Any]]:
     return [json.loads(line) for line in exporter.log().splitlines() if line.startswith("{")]
 
 
+def logged_events(exporter: Exporter) -> dict[int, dict[str, Any]]:
+    """The events of the exporter's JSON log lines, by id."""
+    return {line["event"]["id"]: line["event"] for line in json_log_lines(exporter) if "event" in line}
+
+
 def test_scripted_incidents_are_recorded_served_logged_and_kept_across_a_restart(
     tmp_path: Path, dds_domain: int
 ) -> None:
     database = tmp_path / "history" / "events.db"
     database.parent.mkdir()
     flags = (*FAST, f"--events.path={database}", "--log.format=json")
-    with running_simulator(tmp_path, dds_domain, *SCRIPT):
-        with running_exporter(tmp_path, dds_domain, *flags) as exporter:
-            error = wait_for(
-                lambda: find(exporter, kind="level", robot="robot1", component="/Temp/Sensor1"),
-                30,
-                message="robot1's sensor going to ERROR",
-            )
-            assert len(error) == 1
-            assert (error[0]["old_state"], error[0]["new_state"], error[0]["hardware_id"]) == (
-                "OK",
-                "ERROR",
-                "temp1",
-            )
-            assert error[0]["message"] and error[0]["values"]
-            down = wait_for(
-                lambda: find(exporter, kind="robot_down", robot="robot2"), 30, message="robot2 down"
-            )
-            assert down[0]["new_state"] == "STALE" and down[0]["component"] is None
-            up = wait_for(
-                lambda: find(exporter, kind="robot_up", robot="robot2", old_state="STALE"),
-                30,
-                message="robot2 up",
-            )
-            assert up[0]["time"] > down[0]["time"]
-            # A silent robot is one robot_down, not a STALE event per component.
-            assert find(exporter, robot="robot2", kind="level", new_state="STALE") == []
-            assert [e["kind"] for e in events(exporter, level="ERROR", robot="robot1")] == ["level", "level"]
-            before_restart = events(exporter)
-            samples = exporter.samples()
-            assert samples["overseer_events_written_total"][()] >= len(before_restart)
-            assert samples["overseer_events_store_up"][()] == 1
-            assert samples["overseer_events_database_bytes"][()] > 0
-            logged = {
-                line["event"]["id"]: line["event"] for line in json_log_lines(exporter) if "event" in line
-            }
-            assert {e["id"]: e for e in before_restart} == {
-                i: logged[i] for i in (e["id"] for e in before_restart)
-            }
-            assert any(line["logger"] == "overseer.app" for line in json_log_lines(exporter))
-        with running_exporter(tmp_path, dds_domain, *flags) as restarted:
-            again = wait_for(
-                lambda: (found := events(restarted)) and len(found) > len(before_restart) and found,
-                30,
-                message="new events after the restart",
-            )
-            assert again[-len(before_restart) :] == before_restart  # the old history, unchanged
-            newest_before = max(e["id"] for e in before_restart)
-            assert all(e["id"] > newest_before for e in again[: -len(before_restart)])
-            assert find(restarted, kind="robot_up", robot="robot1", old_state=None)
+    with ExitStack() as stack:
+        # The exporter first, so that it hears the fleet from its first message.
+        exporter = stack.enter_context(running_exporter(tmp_path, dds_domain, *flags))
+        stack.enter_context(running_simulator(tmp_path, dds_domain, *SCRIPT))
+        error = wait_for(
+            lambda: find(exporter, kind="level", robot="robot1", component="/Temp/Sensor1"),
+            30,
+            message="robot1's sensor going to ERROR",
+        )
+        assert len(error) == 1
+        assert (error[0]["old_state"], error[0]["new_state"], error[0]["hardware_id"]) == (
+            "OK",
+            "ERROR",
+            "temp1",
+        )
+        assert error[0]["message"] and error[0]["values"]
+        down = wait_for(lambda: find(exporter, kind="robot_down", robot="robot2"), 30, message="robot2 down")
+        assert down[0]["new_state"] == "STALE" and down[0]["component"] is None
+        up = wait_for(
+            lambda: find(exporter, kind="robot_up", robot="robot2", old_state="STALE"),
+            30,
+            message="robot2 up",
+        )
+        assert up[0]["time"] > down[0]["time"]
+        # A silent robot is one robot_down, not a STALE event per component.
+        assert find(exporter, robot="robot2", kind="level", new_state="STALE") == []
+        assert [e["kind"] for e in events(exporter, level="ERROR", robot="robot1")] == ["level", "level"]
+        before_restart = events(exporter)
+        samples = exporter.samples()
+        assert samples["overseer_events_written_total"][()] >= len(before_restart)
+        assert samples["overseer_events_store_up"][()] == 1
+        assert samples["overseer_events_database_bytes"][()] > 0
+        logged = wait_for(
+            lambda: (lines := logged_events(exporter)).keys() >= {e["id"] for e in before_restart} and lines,
+            10,
+            message="every event in the JSON log",
+        )
+        assert all(logged[e["id"]] == e for e in before_restart)
+        assert any(line["logger"] == "overseer.app" for line in json_log_lines(exporter))
+
+        exporter.stop()
+        newest_before = max(e["id"] for e in before_restart)
+        restarted = stack.enter_context(running_exporter(tmp_path, dds_domain, *flags))
+        wait_for(
+            lambda: [e for e in find(restarted, kind="robot_up", robot="robot1") if e["id"] > newest_before],
+            30,
+            message="robot1 up again after the restart",
+        )
+        again = events(restarted)
+        by_id = {e["id"]: e for e in again}
+        assert len(by_id) == len(again)
+        assert all(by_id[e["id"]] == e for e in before_restart)  # the old history, unchanged
+        restarted_at = min(e["time"] for e in again if e["id"] > newest_before)
+        assert all(e["time"] < restarted_at for e in before_restart)
 
 
 def test_hostile_names_and_messages_over_dds_come_back_intact(tmp_path: Path, dds_domain: int) -> None:
