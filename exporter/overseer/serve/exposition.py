@@ -88,7 +88,7 @@ class FleetExposition:
     def render(self) -> bytes:
         """The exposition of the fleet now."""
         with self._lock:
-            return self._render(self._model.snapshot()) + generate_latest(self._extra)
+            return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
         render = _RenderCache(NumericValues(self._value_keys))
@@ -148,6 +148,7 @@ class FleetExposition:
                 headers["ros_diagnostics_value"].encode(),
                 *values,
                 "".join(tail).encode(),
+                generate_latest(self._extra),  # joined here, not appended: no copy of the whole body
             ]
         )
 
