@@ -15,6 +15,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import cast
 
+from prometheus_client.exposition import generate_latest
+from prometheus_client.registry import Collector, CollectorRegistry
 from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
@@ -58,8 +60,21 @@ class _RobotLines:
 class FleetExposition:
     """Renders the fleet model as the metric contract in the Prometheus text format."""
 
-    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
-        """Render `model`, exporting key-values whose key fully matches `value_keys`."""
+    def __init__(
+        self,
+        model: FleetModel,
+        value_keys: re.Pattern[str],
+        transports: Iterable[str],
+        extra_collectors: Iterable[Collector] = (),
+    ) -> None:
+        """Render `model`, exporting key-values whose key fully matches `value_keys`.
+
+        `extra_collectors` (small ones, such as the event history's) are rendered by prometheus-client
+        and appended after the fleet: what a registry with the fleet's collector first, then them, renders.
+        """
+        self._extra = CollectorRegistry(auto_describe=False)
+        for collector in extra_collectors:
+            self._extra.register(collector)
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
@@ -133,6 +148,7 @@ class FleetExposition:
                 headers["ros_diagnostics_value"].encode(),
                 *values,
                 "".join(tail).encode(),
+                generate_latest(self._extra),  # joined here, not appended: no copy of the whole body
             ]
         )
 

@@ -27,6 +27,8 @@ from urllib.parse import unquote, urlsplit
 from prometheus_client.exposition import choose_encoder
 from prometheus_client.registry import CollectorRegistry
 
+from overseer.history.query import QueryError, parse_event_query
+from overseer.history.store import EventStore, EventsUnavailable
 from overseer.model import FleetModel
 from overseer.serve.api import robot_document, robots_document
 from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
@@ -39,6 +41,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
+EVENTS_PATH = "/api/v1/events"
 MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
 REQUEST_TIMEOUT_SECONDS = 10.0
@@ -53,6 +56,7 @@ class OverseerServer(ThreadingHTTPServer):
     """A threading HTTP server that serves one fleet model and one registry."""
 
     daemon_threads = True
+    events: EventStore | None = None  # the event history, when enabled
     block_on_close = False  # stopping never waits for a slow client
     request_queue_size = 64
 
@@ -250,6 +254,8 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(200, robots_document(self.server.model.snapshot()), head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
+        elif path == EVENTS_PATH:
+            self._events(urlsplit(self.path).query, head_only)
         elif path in ("/", "/index.html"):
             self._send(200, self.server.status_page, "text/html; charset=utf-8", head_only)
         else:
@@ -262,6 +268,20 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(404, {"error": f"unknown robot {name!r}"}, head_only)
         else:
             self._json(200, robot_document(snapshot, robot), head_only)
+
+    def _events(self, query_string: str, head_only: bool) -> None:
+        store = self.server.events
+        if store is None:
+            self._json(404, {"error": "the event history is disabled (events.enabled: false)"}, head_only)
+            return
+        try:
+            events, cursor = store.query(parse_event_query(query_string))
+        except QueryError as error:
+            self._json(400, {"error": str(error)}, head_only)
+        except EventsUnavailable as error:
+            self._json(503, {"error": f"the event history is unavailable: {error}"}, head_only)
+        else:
+            self._json(200, {"events": events, "next": cursor}, head_only)
 
     def _metrics(self, head_only: bool) -> None:
         accept = self.headers.get("Accept", "")
