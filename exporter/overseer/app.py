@@ -10,6 +10,8 @@ from prometheus_client.registry import CollectorRegistry
 
 from overseer.config import Config
 from overseer.model import FleetModel
+from overseer.push.icinga2_metrics import PushCollector
+from overseer.push.icinga2_push import Icinga2Push
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
 from overseer.serve.metrics import FleetCollector
@@ -29,6 +31,7 @@ class Exporter:
     model: FleetModel = field(init=False)
     server: OverseerServer = field(init=False)
     sources: list[Source] = field(default_factory=list)
+    icinga2_push: Icinga2Push | None = None
     _stopping: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
@@ -46,7 +49,8 @@ class Exporter:
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern
         registry.register(FleetCollector(self.model, value_keys, transports))
-        exposition = FleetExposition(self.model, value_keys, transports)
+        push_registry = self._icinga2_push_registry(registry)
+        exposition = FleetExposition(self.model, value_keys, transports, push_registry)
         security = load_web_config(self.config.web.config_file)
         address = self.config.web.host_and_port
         self.server = OverseerServer(address, self.model, registry, exposition, security)
@@ -58,14 +62,29 @@ class Exporter:
         threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
+        if self.icinga2_push is not None:
+            self.icinga2_push.start()
 
     def stop(self) -> None:
         """Stop serving and leave the transports."""
         self._stopping.set()
+        if self.icinga2_push is not None:
+            self.icinga2_push.stop()
         self.server.shutdown()
         self.server.server_close()
         for source in self.sources:
             source.stop()
+
+    def _icinga2_push_registry(self, registry: CollectorRegistry) -> CollectorRegistry | None:
+        """With an `icinga2:` section, the push and a registry of its metrics (also put in `registry`)."""
+        if self.config.icinga2 is None:
+            return None
+        self.icinga2_push = Icinga2Push(self.config.icinga2, self.model, self.config.fleet.expire_after)
+        collector = PushCollector(self.icinga2_push.stats)
+        registry.register(collector)
+        push_registry = CollectorRegistry(auto_describe=True)
+        push_registry.register(collector)
+        return push_registry
 
     def _expire_loop(self) -> None:
         while not self._stopping.wait(EXPIRY_INTERVAL_SECONDS):

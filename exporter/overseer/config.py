@@ -8,12 +8,15 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
+
+if TYPE_CHECKING:
+    from overseer.push.icinga2_config import Icinga2Config
 
 DEFAULT_PORT = 9849
 DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")
@@ -110,6 +113,7 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
     log_level: str = "info"
+    icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
 
 
 _DURATION_PART = re.compile(r"(\d+(?:\.\d+)?)(ms|s|m|h|d)")
@@ -174,7 +178,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
-    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level"})
+    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "icinga2"})
     web = _section(raw, "web", {"listen_address", "config_file"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
@@ -206,6 +210,10 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
                 f"log_level: expected one of {', '.join(_LOG_LEVELS)}, got {raw['log_level']!r}"
             )
         config = replace(config, log_level=level)
+    if raw.get("icinga2") is not None:
+        from overseer.push.icinga2_config import icinga2_config  # imports this module: not at the top
+
+        config = replace(config, icinga2=icinga2_config(raw["icinga2"]))
     return config
 
 

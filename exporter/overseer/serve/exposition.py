@@ -15,6 +15,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import cast
 
+from prometheus_client.exposition import generate_latest
+from prometheus_client.registry import CollectorRegistry
 from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
@@ -58,8 +60,19 @@ class _RobotLines:
 class FleetExposition:
     """Renders the fleet model as the metric contract in the Prometheus text format."""
 
-    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
-        """Render `model`, exporting key-values whose key fully matches `value_keys`."""
+    def __init__(
+        self,
+        model: FleetModel,
+        value_keys: re.Pattern[str],
+        transports: Iterable[str],
+        extra: CollectorRegistry | None = None,
+    ) -> None:
+        """Render `model`, exporting key-values whose key fully matches `value_keys`.
+
+        `extra` holds collectors registered after `FleetCollector` in the scraped registry (such as the
+        Icinga 2 push's); prometheus-client's rendering of it is appended, so the bytes stay equal.
+        """
+        self._extra = extra
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
@@ -73,7 +86,8 @@ class FleetExposition:
     def render(self) -> bytes:
         """The exposition of the fleet now."""
         with self._lock:
-            return self._render(self._model.snapshot())
+            fleet = self._render(self._model.snapshot())
+        return fleet if self._extra is None else fleet + generate_latest(self._extra)
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
         render = _RenderCache(NumericValues(self._value_keys))
