@@ -166,29 +166,22 @@ class Icinga2Push:
         self._backoff = min(self._backoff * 2, BACKOFF_MAX)
 
     def _find_own_objects(self, now: float) -> dict[str, set[str]]:
-        """The hosts and services already in Icinga (after a restart of either)."""
+        """The hosts and services this exporter made earlier (before a restart of either side).
+
+        No filter expression is sent (Icinga 2.15.4+ may refuse them to a narrow ApiUser): the ApiUser's
+        own permission filter already limits the answer to marked objects, and the mark is checked here.
+        """
         mark = self._config.exporter_id
-        hosts = self._client.expect(
-            "GET",
-            "/v1/objects/hosts",
-            {
-                "filter": "host.vars.overseer_exporter == mark",
-                "filter_vars": {"mark": mark},
-                "attrs": ["name"],
-            },
-        )
-        created: dict[str, set[str]] = {item["name"]: set() for item in hosts["results"]}
+        hosts = self._client.expect("GET", "/v1/objects/hosts", {"attrs": ["name", "vars"]})
+        created: dict[str, set[str]] = {
+            item["name"]: set() for item in hosts["results"] if _exporter_of(item) == mark
+        }
         services = self._client.expect(
-            "GET",
-            "/v1/objects/services",
-            {
-                "filter": "service.vars.overseer_exporter == mark",
-                "filter_vars": {"mark": mark},
-                "attrs": ["name", "host_name"],
-            },
+            "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars"]}
         )
         for item in services["results"]:
-            created.setdefault(item["attrs"]["host_name"], set()).add(item["attrs"]["name"])
+            if _exporter_of(item) == mark and item["attrs"]["host_name"] in created:
+                created[item["attrs"]["host_name"]].add(item["attrs"]["name"])
         known = set(self._robot_hosts.values())
         for host in created:
             if host not in known:
@@ -257,11 +250,11 @@ class Icinga2Push:
         path = object_path(kind, host, service)
         status, document = self._client.request("PUT", path, body)
         if not 200 <= status < 300:
-            if status < 500 or not self._exists(path):
+            if "already exists" not in error_text(document):
                 raise Icinga2Error(
                     f"http_{status}", f"creating {path}: HTTP {status}: {error_text(document)}", status
                 )
-            if not self._is_ours(path):
+            if not self._is_ours(path):  # taken: by us before a restart, or by someone else
                 if service:
                     log.warning(
                         "Icinga 2 service %s!%s exists and was not made by this exporter: left alone",
@@ -281,14 +274,15 @@ class Icinga2Push:
             log.info("Icinga 2 host %s ready", host)
         return True
 
-    def _exists(self, path: str) -> bool:
-        status, _ = self._client.request("GET", path, {"attrs": ["name"]})
-        return status == 200
-
     def _is_ours(self, path: str) -> bool:
-        document = self._client.expect("GET", path, {"attrs": ["vars"]})
-        variables = document["results"][0]["attrs"].get("vars") or {}
-        return bool(variables.get("overseer_exporter") == self._config.exporter_id)
+        status, document = self._client.request("GET", path, {"attrs": ["vars"]})
+        if status == 404:  # hidden from us by the ApiUser's filter: not ours
+            return False
+        if status != 200:
+            raise Icinga2Error(
+                f"http_{status}", f"reading {path}: HTTP {status}: {error_text(document)}", status
+            )
+        return _exporter_of(document["results"][0]) == self._config.exporter_id
 
     def _marks(self) -> dict[str, Any]:
         return {"overseer_managed": True, "overseer_exporter": self._config.exporter_id, "dummy_state": 3}
@@ -324,3 +318,9 @@ class Icinga2Push:
         if self._config.zone:
             attrs["zone"] = self._config.zone
         return attrs
+
+
+def _exporter_of(item: dict[str, Any]) -> object:
+    """The exporter id an object of a query answer is marked with (None: unmarked)."""
+    variables = item.get("attrs", {}).get("vars") or {}
+    return variables.get("overseer_exporter") if isinstance(variables, dict) else None
