@@ -38,6 +38,8 @@ class _Connection(http.client.HTTPSConnection):
     def connect(self) -> None:
         """Connect, then wrap the socket with TLS for `server_name`."""
         sock = socket.create_connection((self.host, self.port), self.timeout)
+        # As http.client's own connect: without it, Nagle and delayed ACKs cost 40 ms a request.
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock = self._tls_context.wrap_socket(sock, server_hostname=self._server_name)
 
 
