@@ -18,7 +18,15 @@ import pytest
 
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_push import HOST_SILENT_TEXT
-from support.icinga2 import Icinga2, push_api_user, push_config, running_icinga2
+from support.icinga2 import (
+    PUSH_CERT_USER,
+    Icinga2,
+    client_certificate,
+    push_api_user,
+    push_cert_api_user,
+    push_config,
+    running_icinga2,
+)
 from support.nagios import PluginResult, run_check
 from support.ports import fresh_domain_id
 from support.processes import Exporter, overseer_command, running_exporter, running_simulator, wait_for
@@ -42,8 +50,9 @@ GROUP_SERVICES = {f"ros-diagnostics-{group}" for group in ("Power", "Motor", "Te
 
 @pytest.fixture(scope="module")
 def icinga(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Icinga2]:
-    """Icinga 2 with the push ApiUser example and a few hand-made objects."""
-    with running_icinga2(tmp_path_factory.mktemp("icinga2"), push_api_user() + HANDMADE) as daemon:
+    """Icinga 2 with the push ApiUser example (by password, and by certificate) and hand-made objects."""
+    objects = push_api_user() + push_cert_api_user() + HANDMADE
+    with running_icinga2(tmp_path_factory.mktemp("icinga2"), objects) as daemon:
         yield daemon
 
 
@@ -127,6 +136,49 @@ def test_robots_register_themselves_and_push_what_the_check_prints(icinga: Icing
         assert host_result == PluginResult(0, "UP - site_a/arobot1: diagnostics arriving")
         assert push_metric(exporter, "ok") > 0
         assert exporter.samples()["overseer_icinga2_pending_results"][()] == 0
+
+
+def test_a_client_certificate_authenticates_instead_of_a_password(icinga: Icinga2, tmp_path: Path) -> None:
+    domain = fresh_domain_id()
+    certificate = client_certificate(icinga.root, PUSH_CERT_USER)
+    config = push_config(tmp_path, icinga, "by-cert", "1h", client_cert=certificate)
+    assert "password" not in config.read_text(encoding="utf-8")
+    with (
+        running_exporter(tmp_path, domain, f"--config.file={config}") as exporter,
+        running_simulator(tmp_path, domain, "--robots=1", "--namespace-prefix=grobot", "--rate=2"),
+    ):
+        wait_for(lambda: pushed(icinga, "grobot1", "ros-diagnostics"), timeout=60, message="the robot's host")
+        assert icinga.objects("hosts")["grobot1"]["overseer_exporter"] == "by-cert"
+        created_by = wait_for(  # Icinga writes its log in its own time
+            lambda: re.search(
+                r"Request: PUT /v1/objects/hosts/grobot1 \(from [^)]*\), user: ([^,]+),", icinga.log()
+            ),
+            timeout=30,
+            message="the creation in Icinga's log",
+        )
+        assert created_by is not None and created_by.group(1) == PUSH_CERT_USER
+        assert push_metric(exporter, "ok") > 0
+
+
+def test_the_icinga2_flags_override_the_file_and_name_their_key(tmp_path: Path) -> None:
+    done = subprocess.run(
+        [
+            *overseer_command(),
+            "run",
+            "--icinga2.url=https://127.0.0.1:5665",
+            "--icinga2.username=u",
+            "--icinga2.password-file=/nonexistent/pw",
+            "--icinga2.ca-file=/etc/ssl/certs/ca-certificates.crt",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == 2
+    assert done.stderr == (
+        "overseer run: configuration error: icinga2.password_file: cannot read '/nonexistent/pw': "
+        "No such file or directory\n"
+    )
 
 
 def test_a_level_change_arrives_at_once(icinga: Icinga2, tmp_path: Path) -> None:

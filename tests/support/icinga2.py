@@ -247,27 +247,57 @@ def push_api_user() -> str:
     return text.replace('password = "change-me"', f'password = "{PUSH_PASSWORD}"')
 
 
-def push_config(
-    directory: Path, daemon: Icinga2, exporter_id: str, interval: str, password: str = PUSH_PASSWORD
-) -> Path:
-    """An exporter configuration file pushing to `daemon` as the example ApiUser (password in a file)."""
-    password_file = directory / f"{exporter_id}.password"
-    password_file.write_text(password + "\n", encoding="utf-8")
-    config = directory / f"{exporter_id}.yml"
-    config.write_text(
-        json.dumps(
-            {
-                "icinga2": {
-                    "url": f"https://127.0.0.1:{daemon.api_port}",
-                    "username": PUSH_USER,
-                    "password_file": str(password_file),
-                    "ca_file": str(daemon.ca_file),
-                    "tls_server_name": NODE_NAME,
-                    "interval": interval,
-                    "exporter_id": exporter_id,
-                }
-            }
-        ),
-        encoding="utf-8",
+def push_cert_api_user() -> str:
+    """The push ApiUser example as a second user, `PUSH_CERT_USER`, authenticated by client certificate."""
+    return (
+        push_api_user()
+        .replace(f'"{PUSH_USER}"', f'"{PUSH_CERT_USER}"', 1)
+        .replace(f'password = "{PUSH_PASSWORD}"', f'client_cn = "{PUSH_CERT_USER}"')
     )
+
+
+PUSH_CERT_USER = "overseer-push-cert"
+
+
+def client_certificate(root: Path, cn: str) -> tuple[Path, Path]:
+    """A client certificate and key for `cn`, signed by the CA of the daemon under `root`."""
+    directory = root / "client-certs"
+    directory.mkdir(exist_ok=True)
+    key, csr, cert = (directory / f"{cn}.{suffix}" for suffix in ("key", "csr", "crt"))
+    for args in (
+        ("pki", "new-cert", "--cn", cn, "--key", str(key), "--csr", str(csr)),
+        ("pki", "sign-csr", "--csr", str(csr), "--cert", str(cert)),
+    ):
+        done = icinga2(root, *args)
+        assert done.returncode == 0, f"icinga2 {' '.join(args)} failed:\n{done.stdout}{done.stderr}"
+    return cert, key
+
+
+def push_config(
+    directory: Path,
+    daemon: Icinga2,
+    exporter_id: str,
+    interval: str,
+    password: str = PUSH_PASSWORD,
+    client_cert: tuple[Path, Path] | None = None,
+) -> Path:
+    """An exporter configuration file pushing to `daemon` as the example ApiUser (password in a file).
+
+    With `client_cert` (certificate, key), it authenticates with that certificate instead.
+    """
+    section: dict[str, str] = {
+        "url": f"https://127.0.0.1:{daemon.api_port}",
+        "ca_file": str(daemon.ca_file),
+        "tls_server_name": NODE_NAME,
+        "interval": interval,
+        "exporter_id": exporter_id,
+    }
+    if client_cert is None:
+        password_file = directory / f"{exporter_id}.password"
+        password_file.write_text(password + "\n", encoding="utf-8")
+        section.update(username=PUSH_USER, password_file=str(password_file))
+    else:
+        section.update(client_cert=str(client_cert[0]), client_key=str(client_cert[1]))
+    config = directory / f"{exporter_id}.yml"
+    config.write_text(json.dumps({"icinga2": section}), encoding="utf-8")
     return config
