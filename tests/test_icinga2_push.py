@@ -16,8 +16,11 @@ from pathlib import Path
 
 import pytest
 
+from overseer.config import ConfigError
+from overseer.push.icinga2_config import icinga2_config
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_push import HOST_SILENT_TEXT
+from overseer.push.icinga2_results import split_perfdata
 from support.icinga2 import (
     PUSH_CERT_USER,
     Icinga2,
@@ -94,6 +97,49 @@ def test_names_map_robots_to_icinga_objects_reversibly() -> None:
     assert re.search(group_pattern("Power"), "/Power/Robot Battery")
     assert re.search(group_pattern("Power"), "/Power")
     assert not re.search(group_pattern("Power"), "/PowerSupply/x")
+
+
+def test_perfdata_is_split_on_spaces_outside_quoted_labels() -> None:
+    text = "'error'=2;;;0 'Power:Robot Battery:voltage'=12.5;;;; 'it''s'=1;;;;"
+    assert split_perfdata(text) == (
+        "'error'=2;;;0",
+        "'Power:Robot Battery:voltage'=12.5;;;;",
+        "'it''s'=1;;;;",
+    )
+    assert split_perfdata("") == ()
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        (
+            {"username": None, "password_file": None},
+            "icinga2: give username and password_file, or client_cert",
+        ),
+        ({"password_file": None}, "icinga2.password_file: required with icinga2.username"),
+        ({"client_key": "k.pem"}, "icinga2.client_cert: required with icinga2.client_key"),
+        (
+            {"services": ["robot", "everything"]},
+            "icinga2.services: expected robot or groups, got 'everything'",
+        ),
+        ({"url": None}, "icinga2.url: expected a non-empty string, got None"),
+    ],
+)
+def test_an_incomplete_icinga2_section_names_the_key(
+    icinga: Icinga2, tmp_path: Path, changes: dict[str, object], message: str
+) -> None:
+    password = tmp_path / "pw"
+    password.write_text("secret\n", encoding="utf-8")
+    section: dict[str, object] = {
+        "url": "https://127.0.0.1:5665",
+        "username": "u",
+        "password_file": str(password),
+        "ca_file": str(icinga.ca_file),
+        **changes,
+    }
+    with pytest.raises(ConfigError) as raised:
+        icinga2_config({key: value for key, value in section.items() if value is not None})
+    assert str(raised.value).startswith(message), raised.value
 
 
 def test_robots_register_themselves_and_push_what_the_check_prints(icinga: Icinga2, tmp_path: Path) -> None:

@@ -134,15 +134,14 @@ class Icinga2Push:
             if self._created is None:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
-            delivered = 0
+            attempted = 0
             for queue in (self._urgent, self._pending):
-                while queue and (delivered == 0 or self._clock() < deadline):
+                while queue and (attempted == 0 or self._clock() < deadline):
                     key, result = next(iter(queue.items()))
+                    attempted += 1
                     if self._push(result):
-                        delivered += 1
+                        self.stats.delivered(1, time.time())
                     del queue[key]
-            if delivered:
-                self.stats.delivered(delivered, time.time())
         except Icinga2Error as error:
             self._failed(error, now)
             return
