@@ -7,6 +7,7 @@ exporter, with an exporter id and robot names of its own, fed by the simulator o
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import subprocess
@@ -306,6 +307,32 @@ def test_icinga_down_then_back_gets_the_latest_state(icinga: Icinga2, tmp_path: 
         assert "Icinga 2 push failed" in exporter.log() and "accepts results again" in exporter.log()
 
 
+def test_a_frozen_icinga_times_out_and_then_gets_the_latest_state(icinga: Icinga2, tmp_path: Path) -> None:
+    domain = fresh_domain_id()
+    config = push_config(tmp_path, icinga, "frozen", "1h", timeout="1s")
+    with running_exporter(tmp_path, domain, f"--config.file={config}", *FAST_FLEET) as exporter:
+        with running_simulator(tmp_path, domain, "--robots=1", "--namespace-prefix=hrobot", "--rate=5"):
+            wait_for(
+                lambda: (
+                    icinga.host_result("hrobot1") == PluginResult(0, "UP - hrobot1: diagnostics arriving")
+                ),
+                timeout=60,
+                message="the robot UP in Icinga",
+            )
+            os.killpg(icinga.process.pid, signal.SIGSTOP)  # Icinga accepts connections but never answers
+        try:
+            wait_for(lambda: push_metric(exporter, "timeout") >= 1, timeout=30, message="a timed-out push")
+            assert not exporter.robot("hrobot1")["up"]  # type: ignore[index]
+        finally:
+            os.killpg(icinga.process.pid, signal.SIGCONT)
+        wait_for(
+            lambda: icinga.host_result("hrobot1").state == 1,  # type: ignore[union-attr]
+            timeout=60,
+            message="the robot DOWN in Icinga",
+        )
+        assert "no answer from https://127.0.0.1" in exporter.log()
+
+
 def test_a_restarted_exporter_reuses_its_objects(icinga: Icinga2, tmp_path: Path) -> None:
     domain = fresh_domain_id()
     config = push_config(tmp_path, icinga, "restart", "1h")
@@ -362,8 +389,8 @@ def test_a_wrong_password_is_logged_and_counted_and_the_exporter_keeps_serving(
         running_exporter(tmp_path, domain, f"--config.file={config}") as exporter,
         running_simulator(tmp_path, domain, "--robots=1", "--namespace-prefix=frobot"),
     ):
+        wait_for(lambda: exporter.robot("frobot1"), timeout=30, message="the robot in the exporter")
         wait_for(lambda: push_metric(exporter, "http_401") >= 2, timeout=30, message="refused pushes")
-        assert exporter.robot("frobot1") is not None
         assert exporter.process.poll() is None
         assert "refused the credentials (HTTP 401): check icinga2.username and icinga2.password_file" in (
             exporter.log()

@@ -280,6 +280,7 @@ def push_config(
     interval: str,
     password: str = PUSH_PASSWORD,
     client_cert: tuple[Path, Path] | None = None,
+    timeout: str = "10s",
 ) -> Path:
     """An exporter configuration file pushing to `daemon` as the example ApiUser (password in a file).
 
@@ -291,6 +292,7 @@ def push_config(
         "tls_server_name": NODE_NAME,
         "interval": interval,
         "exporter_id": exporter_id,
+        "timeout": timeout,
     }
     if client_cert is None:
         password_file = directory / f"{exporter_id}.password"
