@@ -228,6 +228,41 @@ def test_the_icinga2_flags_override_the_file_and_name_their_key(tmp_path: Path) 
     )
 
 
+def test_a_group_that_vanished_is_judged_as_the_check_judges_it(icinga: Icinga2, tmp_path: Path) -> None:
+    domain = fresh_domain_id()
+    config = push_config(tmp_path, icinga, "vanished", "1h")
+    with (
+        running_exporter(
+            tmp_path, domain, f"--config.file={config}", *FAST_FLEET, "--fleet.expire-after=4s"
+        ) as exporter,
+        running_simulator(
+            tmp_path,
+            domain,
+            "--robots=1",
+            "--namespace-prefix=irobot",
+            "--rate=5",
+            "--event=8:irobot1:/Camera/Cam1:silence",
+            "--event=8:irobot1:/Camera/Cam2:silence",
+        ),
+    ):
+        wait_for(
+            lambda: pushed(icinga, "irobot1", "ros-diagnostics-Camera"), timeout=60, message="the service"
+        )
+
+        def camera_forgotten() -> bool:
+            robot = exporter.robot("irobot1")
+            return robot is not None and not any(c["name"].startswith("/Camera") for c in robot["components"])
+
+        wait_for(camera_forgotten, timeout=60, message="the Camera components forgotten")
+        expected = checked(exporter, "irobot1", f"--name-regex={group_pattern('Camera')}")
+        assert expected.state == 3 and "no component with name matching" in expected.output
+        wait_for(
+            lambda: pushed(icinga, "irobot1", "ros-diagnostics-Camera") == expected,
+            timeout=10,
+            message="the check's verdict on the vanished group",
+        )
+
+
 def test_a_level_change_arrives_at_once(icinga: Icinga2, tmp_path: Path) -> None:
     domain = fresh_domain_id()
     config = push_config(tmp_path, icinga, "at-once", "1h")  # the next periodic push is an hour away

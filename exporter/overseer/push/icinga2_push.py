@@ -21,7 +21,7 @@ from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text
 from overseer.push.icinga2_config import Icinga2Config
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import host_name, robot_name
-from overseer.push.icinga2_results import CheckResult, robot_results, robot_signature
+from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +58,7 @@ class Icinga2Push:
         self._pending: dict[tuple[str, str], CheckResult] = {}
         self._signatures: dict[str, tuple[object, ...]] = {}
         self._due: dict[str, float] = {}
+        self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
         self._robot_hosts: dict[str, str] = {}  # robot → host, for every robot being pushed
         self._created: dict[str, set[str]] | None = None  # our hosts → our services; None until synced
         self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
@@ -110,7 +111,9 @@ class Icinga2Push:
             self._orphans.pop(host, None)
             self._to_delete.discard(host)
             target = self._urgent if changed else self._pending
-            for result in robot_results(snapshot, robot, kinds):
+            groups = self._groups.setdefault(robot.name, set())
+            groups.update(robot_groups(robot))
+            for result in robot_results(snapshot, robot, kinds, sorted(groups)):
                 self._pending.pop(result.key, None)
                 if result.key not in self._urgent:
                     target[result.key] = result
@@ -122,6 +125,7 @@ class Icinga2Push:
             host = self._robot_hosts.pop(gone)
             self._signatures.pop(gone, None)
             self._due.pop(gone, None)
+            self._groups.pop(gone, None)
             for queue in (self._urgent, self._pending):
                 for key in [key for key in queue if key[0] == host]:
                     del queue[key]

@@ -51,8 +51,14 @@ def robot_groups(robot: RobotState) -> list[str]:
     return sorted({group for name, _ in robot.components if (group := group_of(name)) is not None})
 
 
-def robot_results(snapshot: FleetSnapshot, robot: RobotState, kinds: tuple[str, ...]) -> list[CheckResult]:
-    """The host result and every service result of `robot` now; `kinds` holds robot and/or groups."""
+def robot_results(
+    snapshot: FleetSnapshot, robot: RobotState, kinds: tuple[str, ...], groups: list[str]
+) -> list[CheckResult]:
+    """The host result and every service result of `robot` now; `kinds` holds robot and/or groups.
+
+    `groups` are the group services to judge: the robot's groups now and any it had before, which the
+    check then judges as it would (UNKNOWN, no component matches) instead of leaving them frozen.
+    """
     document = robot_document(snapshot, robot)
     judged = robot_from_document(document)
     host = host_name(robot.name)
@@ -71,7 +77,7 @@ def robot_results(snapshot: FleetSnapshot, robot: RobotState, kinds: tuple[str, 
     if "robot" in kinds:
         results.append(service_result(host, ROBOT_SERVICE, *judge(judged, Settings())))
     if "groups" in kinds:
-        for group in robot_groups(robot):
+        for group in groups:
             settings = Settings(name_regex=re.compile(group_pattern(group)))
             results.append(service_result(host, group_service_name(group), *judge(judged, settings)))
     return results
