@@ -20,7 +20,7 @@ from overseer.model import FleetModel, FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
 from overseer.push.icinga2_config import Icinga2Config
 from overseer.push.icinga2_metrics import PushStats
-from overseer.push.icinga2_names import host_name, robot_name
+from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
 
 log = logging.getLogger(__name__)
@@ -113,6 +113,12 @@ class Icinga2Push:
             target = self._urgent if changed else self._pending
             groups = self._groups.setdefault(robot.name, set())
             groups.update(robot_groups(robot))
+            if self._created is not None:  # and those whose services an earlier run of ours made
+                groups.update(
+                    original_name(service.removeprefix(GROUP_SERVICE_PREFIX))
+                    for service in self._created.get(host, ())
+                    if service.startswith(GROUP_SERVICE_PREFIX)
+                )
             for result in robot_results(snapshot, robot, kinds, sorted(groups)):
                 self._pending.pop(result.key, None)
                 if result.key not in self._urgent:
