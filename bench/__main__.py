@@ -20,6 +20,7 @@ BENCHMARKS = (
     "bench.bench_check",
     "bench.bench_robot_side",
     "bench.bench_events",
+    "bench.bench_icinga2",
 )
 
 

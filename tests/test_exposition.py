@@ -163,3 +163,22 @@ def test_cached_exposition_equals_collector_through_any_changes(steps: list[tupl
                 model.forget_topic(robot, "t")
         fast, reference = both(model, exposition)
         assert fast == reference
+
+
+def test_fast_exposition_with_the_icinga2_push_metrics_equals_the_registry_with_both_collectors() -> None:
+    from overseer.push.icinga2_metrics import PushCollector, PushStats
+
+    model, _ = fleet()
+    stats = PushStats()
+    stats.delivered(7, 1_700_000_000.5)
+    stats.failed("http_401")
+    stats.failed("connection")
+    stats.set_pending(3)
+    collector = PushCollector(stats)
+    registry = CollectorRegistry()
+    registry.register(FleetCollector(model, re.compile(".*"), ["dds"]))
+    registry.register(collector)
+    fast = FleetExposition(model, re.compile(".*"), ["dds"], [collector]).render()
+    assert fast == generate_latest(registry)
+    assert b'overseer_icinga2_pushes_total{result="http_401"} 1.0\n' in fast
+    assert b"overseer_icinga2_pending_results 3.0\n" in fast

@@ -6,11 +6,13 @@ import logging
 import threading
 from dataclasses import dataclass, field, replace
 
-from prometheus_client.registry import CollectorRegistry
+from prometheus_client.registry import Collector, CollectorRegistry
 
 from overseer.config import Config
 from overseer.history.service import EventHistory
 from overseer.model import FleetModel
+from overseer.push.icinga2_metrics import PushCollector
+from overseer.push.icinga2_push import Icinga2Push
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
 from overseer.serve.metrics import FleetCollector
@@ -31,6 +33,7 @@ class Exporter:
     server: OverseerServer = field(init=False)
     sources: list[Source] = field(default_factory=list)
     history: EventHistory | None = None
+    icinga2_push: Icinga2Push | None = None
     _stopping: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
@@ -48,11 +51,15 @@ class Exporter:
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern
         registry.register(FleetCollector(self.model, value_keys, transports))
-        extra_collectors = []
+        extra_collectors: list[Collector] = []
         if self.config.events.enabled:
             self.history = EventHistory(self.config.events, self.model, self.config.log_format == "json")
             extra_collectors.append(self.history.collector)
-            registry.register(self.history.collector)
+        if self.config.icinga2 is not None:
+            self.icinga2_push = Icinga2Push(self.config.icinga2, self.model, self.config.fleet.expire_after)
+            extra_collectors.append(PushCollector(self.icinga2_push.stats))
+        for collector in extra_collectors:
+            registry.register(collector)
         exposition = FleetExposition(self.model, value_keys, transports, extra_collectors)
         security = load_web_config(self.config.web.config_file)
         address = self.config.web.host_and_port
@@ -68,10 +75,14 @@ class Exporter:
         threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
+        if self.icinga2_push is not None:
+            self.icinga2_push.start()
 
     def stop(self) -> None:
         """Stop serving and leave the transports."""
         self._stopping.set()
+        if self.icinga2_push is not None:
+            self.icinga2_push.stop()
         self.server.shutdown()
         self.server.server_close()
         for source in self.sources:

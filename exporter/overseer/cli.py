@@ -149,6 +149,25 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--events.retention", dest="events_retention", metavar="DURATION")
     parser.add_argument("--events.max-size", dest="events_max_size", metavar="SIZE")
+    _add_icinga2_flags(parser)
+
+
+def _add_icinga2_flags(parser: argparse.ArgumentParser) -> None:
+    for flag, metavar, text in _ICINGA2_FLAGS:
+        dest = f"icinga2_{flag.replace('-', '_')}"
+        parser.add_argument(f"--icinga2.{flag}", dest=dest, metavar=metavar, help=text)
+
+
+_ICINGA2_FLAGS = (
+    ("url", "URL", "push to this Icinga 2 API, e.g. https://icinga.example:5665 (see README, Icinga 2)"),
+    ("username", "NAME", "Icinga 2 ApiUser"),
+    ("password-file", "PATH", "file whose first line is the ApiUser's password"),
+    ("ca-file", "PATH", "CA certificate of the Icinga 2 API"),
+    ("tls-server-name", "NAME", "name in the Icinga 2 API's certificate, when not the URL's host"),
+    ("client-cert", "PATH", "client certificate instead of a password"),
+    ("client-key", "PATH", "the client certificate's key"),
+    ("interval", "DURATION", "push every robot's results this often, and at once on a change (default 60s)"),
+)
 
 
 def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
@@ -228,6 +247,10 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.log_level is not None:
         overrides["log_level"] = args.log_level
     overrides.update(_event_overrides(args))
+    for flag, _, _ in _ICINGA2_FLAGS:
+        value = getattr(args, f"icinga2_{flag.replace('-', '_')}", None)
+        if value is not None:
+            overrides[f"icinga2.{flag.replace('-', '_')}"] = value
     return overrides
 
 

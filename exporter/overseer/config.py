@@ -8,12 +8,15 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
+
+if TYPE_CHECKING:
+    from overseer.push.icinga2_config import Icinga2Config
 
 DEFAULT_PORT = 9849
 DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")
@@ -145,6 +148,7 @@ class Config:
     log_level: str = "info"
     events: EventsConfig = field(default_factory=EventsConfig)
     log_format: str = "text"
+    icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
 
 
 _DURATION_PART = re.compile(r"(\d+(?:\.\d+)?)(ms|s|m|h|d)")
@@ -265,7 +269,9 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
     _reject_unknown(
-        raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "events", "log_format"}
+        raw,
+        "",
+        {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "events", "log_format", "icinga2"},
     )
     web = _section(raw, "web", {"listen_address", "config_file"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
@@ -304,7 +310,12 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
             raise ConfigError(f"log_format: expected text or json, got {raw['log_format']!r}")
         config = replace(config, log_format=log_format)
     events = _section(raw, "events", {f.name for f in fields(EventsConfig)})
-    return replace(config, events=_events_config(events))
+    config = replace(config, events=_events_config(events))
+    if raw.get("icinga2") is not None:
+        from overseer.push.icinga2_config import icinga2_config  # imports this module: not at the top
+
+        config = replace(config, icinga2=icinga2_config(raw["icinga2"]))
+    return config
 
 
 def _events_config(raw: dict[str, Any]) -> EventsConfig:

@@ -121,7 +121,9 @@ class Icinga2:
     root: Path
     api_port: int
 
-    def api(self, method: str, path: str, body: dict[str, Any]) -> Any:
+    def api(
+        self, method: str, path: str, body: dict[str, Any], user: str = API_USER, password: str = API_PASSWORD
+    ) -> Any:
         """Call the REST API (GET as POST with X-HTTP-Method-Override, so it can carry a body)."""
         context = ssl.create_default_context(cafile=str(self.root / "datadir" / "certs" / "ca.crt"))
         context.check_hostname = False  # the certificate names the node, not 127.0.0.1
@@ -131,10 +133,15 @@ class Icinga2:
             method="POST",
             headers={"Accept": "application/json", "X-HTTP-Method-Override": method},
         )
-        token = base64.b64encode(f"{API_USER}:{API_PASSWORD}".encode()).decode()
+        token = base64.b64encode(f"{user}:{password}".encode()).decode()
         request.add_header("Authorization", f"Basic {token}")
         with urllib.request.urlopen(request, context=context, timeout=10) as response:
             return json.load(response)
+
+    @property
+    def ca_file(self) -> Path:
+        """The CA certificate that signed the API's certificate (issued to NODE_NAME)."""
+        return self.root / "datadir" / "certs" / "ca.crt"
 
     def reschedule(self, host: str, service: str) -> None:
         """Ask for the service's check to run now."""
@@ -152,7 +159,34 @@ class Icinga2:
             return None
         text, _, long_output = last["output"].partition("\n")
         perfdata = " ".join(quote_label(item) for item in last["performance_data"])
-        return PluginResult(int(last["exit_status"]), join_output(text, perfdata, long_output))
+        # `state`, not `exit_status`: a passive result (process-check-result) leaves exit_status at 0.
+        return PluginResult(int(last["state"]), join_output(text, perfdata, long_output))
+
+    def stop(self) -> None:
+        """Stop the daemon (it saves its state and the objects made over the API, as on shutdown)."""
+        stop_process_group(self.process)
+
+    def start(self) -> None:
+        """Start the stopped daemon again, on the same configuration, state and port."""
+        self.process = start_daemon(self.root)
+        self.wait_until_up()
+
+    def wait_until_up(self) -> None:
+        """Wait until the API answers; RuntimeError with the daemon's output if it exits."""
+        wait_for(lambda: api_is_up(self), timeout=60, message="the Icinga 2 API")
+
+    def host_result(self, host: str) -> PluginResult | None:
+        """The host's last check result (0 UP, 1 DOWN) and output, None before its first one."""
+        attrs = self.api("GET", "/v1/objects/hosts", {"host": host, "attrs": ["last_check_result", "state"]})[
+            "results"
+        ][0]["attrs"]
+        last = attrs["last_check_result"]
+        return None if last is None else PluginResult(int(attrs["state"]), last["output"])
+
+    def objects(self, kind: str) -> dict[str, dict[str, Any]]:
+        """Every object of `kind` (hosts, services) by full name, with its vars."""
+        answer = self.api("GET", f"/v1/objects/{kind}", {"attrs": ["vars"]})
+        return {item["name"]: item["attrs"]["vars"] or {} for item in answer["results"]}
 
     def log(self) -> str:
         """The daemon's main log."""
@@ -168,22 +202,28 @@ def quote_label(item: str) -> str:
 def running_icinga2(root: Path, objects: str) -> Iterator[Icinga2]:
     """Run Icinga 2 with the shipped definitions and `objects` until the block ends, then stop it."""
     api_port = free_port()
-    main_config = write_icinga2_config(root, objects, api_port)
+    write_icinga2_config(root, objects, api_port)
     make_certificates(root)
-    log = (root / "daemon.out").open("wb")
-    process = subprocess.Popen(
-        [ICINGA2, "daemon", "-c", str(main_config), *defines(root)],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
-    log.close()
-    daemon = Icinga2(process, root, api_port)
+    daemon = Icinga2(start_daemon(root), root, api_port)
     try:
-        wait_for(lambda: api_is_up(daemon), timeout=60, message="the Icinga 2 API")
+        daemon.wait_until_up()
         yield daemon
     finally:
-        stop_process_group(process)
+        daemon.stop()
+
+
+def start_daemon(root: Path) -> subprocess.Popen[bytes]:
+    """Start `icinga2 daemon` on the configuration written under `root`, output to root/daemon.out."""
+    log = (root / "daemon.out").open("ab")
+    try:
+        return subprocess.Popen(
+            [ICINGA2, "daemon", "-c", str(root / "configdir" / "icinga2.conf"), *defines(root)],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+    finally:
+        log.close()
 
 
 def api_is_up(daemon: Icinga2) -> bool:
@@ -193,3 +233,73 @@ def api_is_up(daemon: Icinga2) -> bool:
         raise RuntimeError(f"icinga2 exited with {daemon.process.returncode}:\n{output}")
     daemon.api("GET", "/v1/status/IcingaApplication", {})
     return True
+
+
+PUSH_USER = "overseer-push"
+PUSH_PASSWORD = "overseer-push-password"
+PUSH_API_USER_EXAMPLE = ICINGA2_DEPLOY / "push" / "api-user-overseer.conf"
+
+
+def push_api_user() -> str:
+    """The shipped push ApiUser example, exactly, with the test's password instead of the placeholder."""
+    text = PUSH_API_USER_EXAMPLE.read_text(encoding="utf-8")
+    assert text.count('password = "change-me"') == 1, "the example's password line changed"
+    return text.replace('password = "change-me"', f'password = "{PUSH_PASSWORD}"')
+
+
+def push_cert_api_user() -> str:
+    """The push ApiUser example as a second user, `PUSH_CERT_USER`, authenticated by client certificate."""
+    return (
+        push_api_user()
+        .replace(f'"{PUSH_USER}"', f'"{PUSH_CERT_USER}"', 1)
+        .replace(f'password = "{PUSH_PASSWORD}"', f'client_cn = "{PUSH_CERT_USER}"')
+    )
+
+
+PUSH_CERT_USER = "overseer-push-cert"
+
+
+def client_certificate(root: Path, cn: str) -> tuple[Path, Path]:
+    """A client certificate and key for `cn`, signed by the CA of the daemon under `root`."""
+    directory = root / "client-certs"
+    directory.mkdir(exist_ok=True)
+    key, csr, cert = (directory / f"{cn}.{suffix}" for suffix in ("key", "csr", "crt"))
+    for args in (
+        ("pki", "new-cert", "--cn", cn, "--key", str(key), "--csr", str(csr)),
+        ("pki", "sign-csr", "--csr", str(csr), "--cert", str(cert)),
+    ):
+        done = icinga2(root, *args)
+        assert done.returncode == 0, f"icinga2 {' '.join(args)} failed:\n{done.stdout}{done.stderr}"
+    return cert, key
+
+
+def push_config(
+    directory: Path,
+    daemon: Icinga2,
+    exporter_id: str,
+    interval: str,
+    password: str = PUSH_PASSWORD,
+    client_cert: tuple[Path, Path] | None = None,
+    timeout: str = "10s",
+) -> Path:
+    """An exporter configuration file pushing to `daemon` as the example ApiUser (password in a file).
+
+    With `client_cert` (certificate, key), it authenticates with that certificate instead.
+    """
+    section: dict[str, str] = {
+        "url": f"https://127.0.0.1:{daemon.api_port}",
+        "ca_file": str(daemon.ca_file),
+        "tls_server_name": NODE_NAME,
+        "interval": interval,
+        "exporter_id": exporter_id,
+        "timeout": timeout,
+    }
+    if client_cert is None:
+        password_file = directory / f"{exporter_id}.password"
+        password_file.write_text(password + "\n", encoding="utf-8")
+        section.update(username=PUSH_USER, password_file=str(password_file))
+    else:
+        section.update(client_cert=str(client_cert[0]), client_key=str(client_cert[1]))
+    config = directory / f"{exporter_id}.yml"
+    config.write_text(json.dumps({"icinga2": section}), encoding="utf-8")
+    return config

@@ -69,8 +69,9 @@ class FleetExposition:
     ) -> None:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
-        `extra_collectors` (small ones, such as the event history's) are rendered by prometheus-client
-        and appended after the fleet: what a registry with the fleet's collector first, then them, renders.
+        `extra_collectors` (small ones: the event history's, the Icinga 2 push's) are rendered by
+        prometheus-client and appended after the fleet: what a registry with the fleet's collector first,
+        then them, renders.
         """
         self._extra = CollectorRegistry(auto_describe=False)
         for collector in extra_collectors:

@@ -1,0 +1,1 @@
+"""Outputs that push the fleet's state to other servers (Icinga 2), from model snapshots."""

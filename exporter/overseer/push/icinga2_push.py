@@ -1,0 +1,335 @@
+"""The push loop: registers every robot in Icinga 2 and delivers its check results.
+
+It reads `model.snapshot()` every tick. A robot whose level (or up/down, or set of components)
+changed has its results queued as urgent at once; every robot's results are queued again every
+`interval`. Pending results are kept as the latest one per host and service, never as a queue of
+every intermediate one, so after an outage Icinga gets the state now. Objects are created on first
+need and marked with `vars.overseer_exporter`; only objects with this exporter's mark are ever
+changed or deleted.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from overseer.model import FleetModel, FleetSnapshot
+from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
+from overseer.push.icinga2_config import Icinga2Config
+from overseer.push.icinga2_metrics import PushStats
+from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
+from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
+
+log = logging.getLogger(__name__)
+
+TICK_SECONDS = 0.25
+BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the model again
+BACKOFF_MIN, BACKOFF_MAX = 1.0, 30.0
+SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
+HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
+# Active checks only run once a pushed result's TTL ran out; then `dummy` says the exporter is silent.
+FALLBACK_CHECK_INTERVAL = 86400.0
+
+
+class Icinga2Push:
+    """Keeps Icinga 2's hosts and services in step with the fleet model."""
+
+    def __init__(
+        self,
+        config: Icinga2Config,
+        model: FleetModel,
+        expire_after: float,
+        stats: PushStats | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        """Push `model` per `config`; hosts of robots not seen within `expire_after` of start are deleted."""
+        self._config = config
+        self._model = model
+        self._expire_after = expire_after
+        self.stats = stats or PushStats()
+        self._clock = clock
+        self._client = Icinga2Client(config)
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._urgent: dict[tuple[str, str], CheckResult] = {}
+        self._pending: dict[tuple[str, str], CheckResult] = {}
+        self._signatures: dict[str, tuple[object, ...]] = {}
+        self._due: dict[str, float] = {}
+        self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
+        self._robot_hosts: dict[str, str] = {}  # robot → host, for every robot being pushed
+        self._created: dict[str, set[str]] | None = None  # our hosts → our services; None until synced
+        self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
+        self._orphans: dict[str, float] = {}  # our hosts found at start, not yet seen: → deletion time
+        self._to_delete: set[str] = set()
+        self._retry_at = 0.0
+        self._backoff = BACKOFF_MIN
+        self._last_error = ""
+
+    def start(self) -> None:
+        """Run the loop in a daemon thread."""
+        self._thread = threading.Thread(target=self._run, name="icinga2-push", daemon=True)
+        self._thread.start()
+        log.info("pushing to Icinga 2 at %s every %gs", self._config.url, self._config.interval)
+
+    def stop(self) -> None:
+        """Stop the loop and close the connection."""
+        self._stopping.set()
+        if self._thread is not None:
+            self._thread.join(timeout=self._config.timeout + 5)
+        self._client.close()
+
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            try:
+                self.step()
+            except Exception:  # the push must never take the exporter down; it tries again next tick
+                log.exception("Icinga 2 push: unexpected error")
+                self._retry_at = self._clock() + self._backoff
+            self._stopping.wait(TICK_SECONDS)
+
+    def step(self) -> None:
+        """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off."""
+        now = self._clock()
+        self._queue(self._model.snapshot(), now)
+        if now >= self._retry_at:
+            self._deliver(now)
+        self.stats.set_pending(len(self._urgent) + len(self._pending))
+
+    def _queue(self, snapshot: FleetSnapshot, now: float) -> None:
+        present = set()
+        kinds = self._config.services
+        for robot in snapshot.robots:
+            present.add(robot.name)
+            signature = robot_signature(snapshot, robot)
+            changed = signature != self._signatures.get(robot.name)
+            if not changed and now < self._due.get(robot.name, 0.0):
+                continue
+            host = self._robot_hosts.setdefault(robot.name, host_name(robot.name))
+            self._orphans.pop(host, None)
+            self._to_delete.discard(host)
+            target = self._urgent if changed else self._pending
+            groups = self._groups.setdefault(robot.name, set())
+            groups.update(robot_groups(robot))
+            if self._created is not None:  # and those whose services an earlier run of ours made
+                groups.update(
+                    original_name(service.removeprefix(GROUP_SERVICE_PREFIX))
+                    for service in self._created.get(host, ())
+                    if service.startswith(GROUP_SERVICE_PREFIX)
+                )
+            for result in robot_results(snapshot, robot, kinds, sorted(groups)):
+                self._pending.pop(result.key, None)
+                if result.key not in self._urgent:
+                    target[result.key] = result
+                else:
+                    self._urgent[result.key] = result
+            self._signatures[robot.name] = signature
+            self._due[robot.name] = now + self._config.interval
+        for gone in [name for name in self._robot_hosts if name not in present]:
+            host = self._robot_hosts.pop(gone)
+            self._signatures.pop(gone, None)
+            self._due.pop(gone, None)
+            self._groups.pop(gone, None)
+            for queue in (self._urgent, self._pending):
+                for key in [key for key in queue if key[0] == host]:
+                    del queue[key]
+            self._to_delete.add(host)
+            log.info("robot %s was forgotten: deleting its Icinga 2 objects", gone)
+
+    def _deliver(self, now: float) -> None:
+        deadline = now + BATCH_SECONDS
+        try:
+            if self._created is None:
+                self._created = self._find_own_objects(now)
+            self._delete_forgotten(now)
+            attempted = 0
+            for queue in (self._urgent, self._pending):
+                while queue and (attempted == 0 or self._clock() < deadline):
+                    key, result = next(iter(queue.items()))
+                    attempted += 1
+                    if self._push(result):
+                        self.stats.delivered(1, time.time())
+                    del queue[key]
+        except Icinga2Error as error:
+            self._failed(error, now)
+            return
+        if self._last_error:
+            log.info("Icinga 2 at %s accepts results again", self._config.url)
+            self._last_error = ""
+        self._backoff = BACKOFF_MIN
+
+    def _failed(self, error: Icinga2Error, now: float) -> None:
+        self.stats.failed(error.reason)
+        text = str(error)
+        if error.status == 401:
+            text = (
+                f"Icinga 2 at {self._config.url} refused the credentials (HTTP 401): check icinga2.username "
+                "and icinga2.password_file, or the client certificate"
+            )
+        if text != self._last_error:
+            log.warning("Icinga 2 push failed, retrying in %gs: %s", self._backoff, text)
+        self._last_error = text
+        self._retry_at = now + self._backoff
+        self._backoff = min(self._backoff * 2, BACKOFF_MAX)
+
+    def _find_own_objects(self, now: float) -> dict[str, set[str]]:
+        """The hosts and services this exporter made earlier (before a restart of either side).
+
+        No filter expression is sent (Icinga 2.15.4+ may refuse them to a narrow ApiUser): the ApiUser's
+        own permission filter already limits the answer to marked objects, and the mark is checked here.
+        """
+        mark = self._config.exporter_id
+        hosts = self._client.expect("GET", "/v1/objects/hosts", {"attrs": ["name", "vars"]})
+        created: dict[str, set[str]] = {
+            item["name"]: set() for item in hosts["results"] if _exporter_of(item) == mark
+        }
+        services = self._client.expect(
+            "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars"]}
+        )
+        for item in services["results"]:
+            if _exporter_of(item) == mark and item["attrs"]["host_name"] in created:
+                created[item["attrs"]["host_name"]].add(item["attrs"]["name"])
+        known = set(self._robot_hosts.values())
+        for host in created:
+            if host not in known:
+                self._orphans[host] = now + self._expire_after
+        log.info("found %d hosts of this exporter (%s) in Icinga 2", len(created), mark)
+        return created
+
+    def _delete_forgotten(self, now: float) -> None:
+        assert self._created is not None
+        for host, when in list(self._orphans.items()):
+            if now >= when:
+                self._to_delete.add(host)
+                del self._orphans[host]
+        for host in list(self._to_delete):
+            if host in self._created:
+                status, _ = self._client.request("DELETE", object_path("hosts", host) + "?cascade=1")
+                if status not in (200, 404):
+                    raise Icinga2Error(f"http_{status}", f"deleting host {host}: HTTP {status}", status)
+                del self._created[host]
+            self._to_delete.discard(host)
+
+    def _push(self, result: CheckResult) -> bool:
+        """Deliver one result, creating its host or service first; False when it was dropped."""
+        assert self._created is not None
+        if result.host in self._foreign:
+            return False
+        if result.host not in self._created and not self._create(
+            "hosts", result.host, "", self._host_attrs(result.host)
+        ):
+            return False
+        if result.service and result.service not in self._created[result.host]:
+            self._create("services", result.host, result.service, self._service_attrs())
+        body: dict[str, Any] = {
+            "type": "Service" if result.service else "Host",
+            "exit_status": result.exit_status,
+            "plugin_output": result.plugin_output,
+            "performance_data": list(result.performance_data),
+            "ttl": self._config.ttl,
+            "check_source": f"overseer/{self._config.exporter_id}",
+        }
+        if result.service:
+            body["service"] = f"{result.host}!{result.service}"
+        else:
+            body["host"] = result.host
+        status, document = self._client.request("POST", "/v1/actions/process-check-result", body)
+        if status == 404:  # deleted behind our back (or Icinga lost it): create it again next time
+            self.stats.failed("http_404")
+            if result.service:
+                self._created[result.host].discard(result.service)
+            else:
+                self._created.pop(result.host, None)
+            return False
+        if not 200 <= status < 300:
+            raise Icinga2Error(
+                f"http_{status}", f"process-check-result: HTTP {status}: {error_text(document)}", status
+            )
+        return True
+
+    def _create(self, kind: str, host: str, service: str, attrs: dict[str, Any]) -> bool:
+        """PUT one object; an existing one of ours is taken over, one not ours is left alone (False)."""
+        assert self._created is not None
+        template = self._config.service_template if service else self._config.host_template
+        body: dict[str, Any] = {"attrs": attrs}
+        if template:
+            body["templates"] = [template]
+        path = object_path(kind, host, service)
+        status, document = self._client.request("PUT", path, body)
+        if not 200 <= status < 300:
+            if "already exists" not in error_text(document):
+                raise Icinga2Error(
+                    f"http_{status}", f"creating {path}: HTTP {status}: {error_text(document)}", status
+                )
+            if not self._is_ours(path):  # taken: by us before a restart, or by someone else
+                if service:
+                    log.warning(
+                        "Icinga 2 service %s!%s exists and was not made by this exporter: left alone",
+                        host,
+                        service,
+                    )
+                    return False
+                log.warning(
+                    "Icinga 2 host %s exists and was not made by this exporter: its robot is not pushed", host
+                )
+                self._foreign.add(host)
+                return False
+        if service:
+            self._created.setdefault(host, set()).add(service)
+        else:
+            self._created.setdefault(host, set())
+            log.info("Icinga 2 host %s ready", host)
+        return True
+
+    def _is_ours(self, path: str) -> bool:
+        status, document = self._client.request("GET", path, {"attrs": ["vars"]})
+        if status == 404:  # hidden from us by the ApiUser's filter: not ours
+            return False
+        if status != 200:
+            raise Icinga2Error(
+                f"http_{status}", f"reading {path}: HTTP {status}: {error_text(document)}", status
+            )
+        return _exporter_of(document["results"][0]) == self._config.exporter_id
+
+    def _marks(self) -> dict[str, Any]:
+        return {"overseer_managed": True, "overseer_exporter": self._config.exporter_id, "dummy_state": 3}
+
+    def _host_attrs(self, host: str) -> dict[str, Any]:
+        variables = {**self._marks(), "ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT}
+        return self._with_zone(
+            {
+                "check_command": "dummy",
+                "enable_active_checks": True,
+                "enable_passive_checks": True,
+                "check_interval": FALLBACK_CHECK_INTERVAL,
+                "retry_interval": FALLBACK_CHECK_INTERVAL,
+                "max_check_attempts": 1,
+                "vars": variables,
+            }
+        )
+
+    def _service_attrs(self) -> dict[str, Any]:
+        return self._with_zone(
+            {
+                "check_command": "dummy",
+                "enable_active_checks": True,
+                "enable_passive_checks": True,
+                "check_interval": FALLBACK_CHECK_INTERVAL,
+                "retry_interval": FALLBACK_CHECK_INTERVAL,
+                "max_check_attempts": 1,
+                "vars": {**self._marks(), "dummy_text": SILENT_TEXT},
+            }
+        )
+
+    def _with_zone(self, attrs: dict[str, Any]) -> dict[str, Any]:
+        if self._config.zone:
+            attrs["zone"] = self._config.zone
+        return attrs
+
+
+def _exporter_of(item: dict[str, Any]) -> object:
+    """The exporter id an object of a query answer is marked with (None: unmarked)."""
+    variables = item.get("attrs", {}).get("vars") or {}
+    return variables.get("overseer_exporter") if isinstance(variables, dict) else None
