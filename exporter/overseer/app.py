@@ -12,6 +12,7 @@ from overseer.config import Config
 from overseer.model import FleetModel
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
+from overseer.serve.message_labels import MessageLabels
 from overseer.serve.metrics import FleetCollector
 from overseer.serve.web_config import load_web_config
 from overseer.sources import Source
@@ -45,8 +46,14 @@ class Exporter:
         registry = CollectorRegistry(auto_describe=True)
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern
-        registry.register(FleetCollector(self.model, value_keys, transports))
-        exposition = FleetExposition(self.model, value_keys, transports)
+        metrics, external_url = self.config.metrics, self.config.web.external_url
+        messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
+        registry.register(
+            FleetCollector(self.model, value_keys, transports, messages=messages, external_url=external_url)
+        )
+        exposition = FleetExposition(
+            self.model, value_keys, transports, messages=messages, external_url=external_url
+        )
         security = load_web_config(self.config.web.config_file)
         address = self.config.web.host_and_port
         self.server = OverseerServer(address, self.model, registry, exposition, security)
