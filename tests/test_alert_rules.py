@@ -176,3 +176,24 @@ def test_a_down_robot_inhibits_exactly_the_component_alerts_of_the_same_robot() 
     assert inhibited == {
         name for name in alerts() if "{{ $labels.component }}" in alerts()[name]["annotations"]["summary"]
     }
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_component_alerts_carry_message_and_robot_link_in_annotations_never_in_labels(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        assert "message" not in rule.get("labels", {}), name
+        annotations = rule["annotations"]
+        if name.startswith("RosComponent"):
+            assert "ros_diagnostics_status_message{" in annotations["message"], name
+            assert '| label "message"' in annotations["message"], name
+        if name.startswith("Ros"):
+            assert "overseer_web_info{" in annotations["status_page_url"], name
+            assert "/?robot={{ $labels.robot | urlquery }}" in annotations["status_page_url"], name
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_template_queries_quote_label_values_with_q_so_hostile_names_stay_one_string(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        for annotation, text in rule["annotations"].items():
+            if "| query" in text:
+                assert '"%s"' not in text and "=%q" in text, f"{name} {annotation}"
