@@ -20,7 +20,7 @@ from prometheus_client.utils import floatToGoString
 from overseer import __version__
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.serve.metrics import DROP_REASONS, NumericValues, _Families, message_counts
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
@@ -177,6 +177,7 @@ def _lines_for(
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
     # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
     escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
+    message_prefix = "ros_diagnostics_status_message{"
     robot_label = f'robot="{escape(robot.name)}"'
     reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
     lines = _LinesBuilder(cached)
@@ -209,8 +210,7 @@ def _lines_for(
             values.encode(),
             b""
             if message is None
-            else f'ros_diagnostics_status_message{{{identity},message="{escape_label_value(message)}",'
-            f"{robot_label}}} 1.0\n".encode(),
+            else f'{message_prefix}{identity},message="{message}",{robot_label}}} 1.0\n'.encode(),
         )
     level_lines, changes, values_lines, message_lines, offsets = lines.finish(len(levels))
     # A component missing from the latest message renders by its own time: never copied (None).
@@ -246,13 +246,23 @@ class _LinesBuilder:
         self._offsets = array("I", self._sizes)
         self._next = 0  # the first component not yet in the pieces
 
-    def add(self, index: int, *family_lines: bytes) -> None:
+    def add(self, index: int, levels: bytes, changes: bytes, values: bytes, message: bytes) -> None:
         """Component `index`'s freshly rendered lines, one bytes per family; those before it come cached."""
-        self._copy_cached(index)
-        for family, text in enumerate(family_lines):
-            self._pieces[family].append(text)
-            self._sizes[family] += len(text)
-        self._offsets.extend(self._sizes)
+        if index != self._next:
+            self._copy_cached(index)
+        # Unrolled: this runs for every component rendered, and most have no values or message line.
+        pieces, sizes = self._pieces, self._sizes
+        pieces[0].append(levels)
+        sizes[0] += len(levels)
+        pieces[1].append(changes)
+        sizes[1] += len(changes)
+        if values:
+            pieces[2].append(values)
+            sizes[2] += len(values)
+        if message:
+            pieces[3].append(message)
+            sizes[3] += len(message)
+        self._offsets.extend(sizes)
         self._next = index + 1
 
     def finish(self, count: int) -> tuple[bytes, bytes, bytes, bytes, array[int]]:
@@ -290,7 +300,10 @@ class _RenderCache:
 
     def __init__(self, numbers: NumericValues, messages: MessageLabels) -> None:
         self.numbers = numbers
-        self.message = messages.label
+        self._message_length = messages.length
+        # MessageLabels.wants, inlined (it runs for every component rendered); the tests hold them equal.
+        self._all_messages, self._problem_messages = messages.mode == "all", messages.mode == "problems"
+        self._message_labels: dict[str, str] = {}
         self._escaped: dict[str, str] = {}
         self._formatted: dict[float, str] = {}
 
@@ -299,6 +312,17 @@ class _RenderCache:
         if escaped is None:
             escaped = self._escaped[text] = escape_label_value(text)
         return escaped
+
+    def message(self, component: Component) -> str | None:
+        """The escaped message label of `component`'s status-message line, or None for no line."""
+        if not (self._all_messages or (self._problem_messages and component.level)):
+            return None
+        text = component.message
+        label = self._message_labels.get(text)
+        if label is None:
+            label = escape_label_value(message_label_value(text, self._message_length))
+            self._message_labels[text] = label
+        return label
 
     def number(self, value: float) -> str:
         if not value:  # 0.0 == -0.0 as keys, but they render differently

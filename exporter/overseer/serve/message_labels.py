@@ -43,11 +43,13 @@ class MessageLabels:
         if self.length < 1:
             raise ValueError(f"message label length must be positive, got {self.length}")
 
+    def wants(self, component: Component) -> bool:
+        """Whether `component` has a status-message series."""
+        return self.mode == "all" or (self.mode == "problems" and component.level != Level.OK)
+
     def label(self, component: Component) -> str | None:
         """The message label of `component`'s series, or None when it has no series."""
-        if self.mode == "none" or (self.mode == "problems" and component.level == Level.OK):
-            return None
-        return message_label_value(component.message, self.length)
+        return message_label_value(component.message, self.length) if self.wants(component) else None
 
 
 DEFAULT_MESSAGE_LABELS = MessageLabels()
