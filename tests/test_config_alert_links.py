@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from overseer.cli import _exporter_overrides, _parser
-from overseer.config import Config, ConfigError, Ros1Robot, load_config, master_host
+from overseer.config import Config, ConfigError, Ros1Robot, load_config
+from overseer.ros_master import master_host
 from support.processes import overseer_command
 
 
@@ -84,11 +85,13 @@ def test_bad_values_name_key_and_value(tmp_path: Path, text: str, message: str) 
         ("http://10.0.0.5:11311/", "10.0.0.5"),
         ("http://forklift-3.site-a.example:11311", "forklift-3.site-a.example"),
         ("http://Robot7", "Robot7"),
+        ("https://[fd00::5]:11311", "fd00::5"),
     ],
 )
 def test_robot_of_a_master_is_named_after_its_host(uri: str, host: str) -> None:
     assert master_host(uri) == host
-    assert run_flags(f"--ros-master={uri}").ros1.robots == (Ros1Robot(host, uri),)
+    if "[" not in uri:  # the ROS 1 source takes IPv4 addresses and host names only
+        assert run_flags(f"--ros-master={uri}").ros1.robots == (Ros1Robot(host, uri),)
 
 
 def test_ros_master_is_repeatable_and_mixes_with_named_robots() -> None:

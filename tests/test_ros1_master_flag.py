@@ -7,6 +7,7 @@ from typing import Any
 
 from prometheus_client.parser import text_string_to_metric_families
 
+from support.nagios import run_check
 from support.processes import Exporter, running_exporter, wait_for
 from support.ros1 import running_master, running_publisher
 
@@ -71,3 +72,13 @@ def test_ros1_robot_name_overrides_the_default_of_the_one_master(tmp_path: Path,
         forklift = wait_for(lambda: robot_up(exporter, "forklift"), 30, message="robot forklift up")
         assert forklift["transport"] == "ros1"
         assert robot_names(exporter) == {"forklift"}
+
+
+def test_check_with_ros_master_alone_names_the_robot_as_the_exporter_does(tmp_path: Path) -> None:
+    with (
+        running_master(tmp_path) as master,
+        running_publisher(tmp_path, master, "aggregator", AGGREGATOR),
+    ):
+        result = run_check("--ros-master", master.uri, "-t", "10")
+    assert result.state == 1, result.output
+    assert result.output.splitlines()[0].startswith("WARNING - 127.0.0.1: /Temp/Motor (Warm)"), result.output

@@ -14,6 +14,7 @@ import yaml
 
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
+from overseer.ros_master import master_host
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABEL_LENGTH, MESSAGE_LABEL_MODES
 
 DEFAULT_PORT = 9849
@@ -287,12 +288,6 @@ def _ros1_robot(item: object, key: str) -> Ros1Robot:
     if topic not in DIAGNOSTIC_TOPICS:
         raise ConfigError(f"{key}.topic: expected diagnostics_agg or diagnostics, got {topic!r}")
     return Ros1Robot(name, master_uri, topic)
-
-
-def master_host(master_uri: str) -> str:
-    """The host of a ROS master URI, the default name of its robot: `http://10.0.0.5:11311` → `10.0.0.5`."""
-    netloc = master_uri.split("://", 1)[1].split("/", 1)[0]
-    return netloc.rpartition(":")[0] if ":" in netloc else netloc
 
 
 def _domain(item: object, key: str) -> DomainConfig:
