@@ -189,7 +189,8 @@ def test_component_alerts_carry_message_and_robot_link_in_annotations_never_in_l
             assert '| label "message"' in annotations["message"], name
         if name.startswith("Ros"):
             assert "overseer_web_info{" in annotations["status_page_url"], name
-            assert "/?robot={{ $labels.robot | urlquery }}" in annotations["status_page_url"], name
+            link = '/?robot={{ reReplaceAll `\\+` "%20" ($labels.robot | urlquery) }}'
+            assert link in annotations["status_page_url"], name
 
 
 @pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
