@@ -61,13 +61,13 @@ def measure(series_wanted: int) -> list[Row]:
         model.apply(f"robot{robots}", statuses_for(robots, 0), "dds")
         robots += 1
         if robots == 1:
-            per_robot = FleetExposition(model, re.compile(".*"), ["dds"]).render().count(b"\n") - 30
+            per_robot = FleetExposition(model, re.compile(".*"), ["dds"]).render().count(b"\n") - 34
     registry = CollectorRegistry()
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
     registry.register(FleetCollector(model, re.compile(".*"), ["dds"]))
     server = OverseerServer(("127.0.0.1", 0), model, registry, exposition)
     threading.Thread(target=server.serve_forever, daemon=True).start()
-    series = exposition.render().count(b"\n") - 30
+    series = exposition.render().count(b"\n") - 34
 
     naive_registry = CollectorRegistry()
     level = Gauge(

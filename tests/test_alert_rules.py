@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 from typing import Any
@@ -176,3 +177,103 @@ def test_a_down_robot_inhibits_exactly_the_component_alerts_of_the_same_robot() 
     assert inhibited == {
         name for name in alerts() if "{{ $labels.component }}" in alerts()[name]["annotations"]["summary"]
     }
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_component_alerts_carry_message_and_robot_link_in_annotations_never_in_labels(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        assert "message" not in rule.get("labels", {}), name
+        annotations = rule["annotations"]
+        if name.startswith("RosComponent"):
+            assert "ros_diagnostics_status_message{" in annotations["message"], name
+            assert '| label "message"' in annotations["message"], name
+        if name.startswith("Ros"):
+            assert "overseer_web_info{" in annotations["status_page_url"], name
+            link = '/?robot={{ reReplaceAll `\\+` "%20" ($labels.robot | urlquery) }}'
+            assert link in annotations["status_page_url"], name
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_template_queries_quote_label_values_with_q_so_hostile_names_stay_one_string(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        for annotation, text in rule["annotations"].items():
+            if "| query" in text:
+                assert '"%s"' not in text and "=%q" in text, f"{name} {annotation}"
+
+
+TEMPLATES = RULES_DIR / "overseer.tmpl"
+
+
+def notification(*alerts: dict[str, Any], status: str = "firing") -> dict[str, Any]:
+    """Alertmanager's template data (the webhook's JSON) for one notification of robot alpha."""
+    return {
+        "receiver": "fleet-critical",
+        "status": status,
+        "alerts": [{"status": status, "startsAt": "2026-11-23T09:00:00Z", **alert} for alert in alerts],
+        "groupLabels": {"robot": "alpha"},
+        "commonLabels": {},
+        "commonAnnotations": {},
+        "externalURL": "http://alertmanager:9093",
+    }
+
+
+BATTERY_ERROR = {
+    "labels": {"alertname": "RosComponentError", "robot": "alpha", "component": "/Power/Battery"},
+    "annotations": {
+        "summary": "alpha: /Power/Battery is in ERROR",
+        "message": "battery critically low (4 %)",
+        "status_page_url": "https://ops.example/?robot=alpha",
+        "runbook_url": "docs/runbook.md#roscomponenterror",
+    },
+}
+ROBOT_DOWN = {
+    "labels": {"alertname": "RosRobotDown", "robot": "alpha"},
+    "annotations": {"summary": "alpha is down", "status_page_url": "https://ops.example/?robot=alpha"},
+}
+
+
+def render(tmp_path: Any, template: str, data: dict[str, Any]) -> str:
+    """`{{ template "<template>" . }}` rendered from the shipped templates by amtool."""
+    data_path = tmp_path / "data.json"
+    data_path.write_text(json.dumps(data), encoding="utf-8")
+    result = run(
+        "amtool",
+        "template",
+        "render",
+        f"--template.glob={TEMPLATES}",
+        f'--template.text={{{{ template "{template}" . }}}}',
+        f"--template.data={data_path}",
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_alertmanager_example_loads_the_shipped_templates() -> None:
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    assert [RULES_DIR / path for path in config["templates"]] == [TEMPLATES]
+
+
+def test_template_titles_a_battery_error_with_its_message(tmp_path: Any) -> None:
+    assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR)) == (
+        "alpha: Power/Battery ERROR — battery critically low (4 %)"
+    )
+
+
+def test_template_text_lists_every_alert_with_its_links(tmp_path: Any) -> None:
+    assert render(tmp_path, "overseer.text", notification(BATTERY_ERROR, ROBOT_DOWN)) == (
+        "alpha: Power/Battery ERROR — battery critically low (4 %)\n"
+        "  status page: https://ops.example/?robot=alpha\n"
+        "  runbook: docs/runbook.md#roscomponenterror\n"
+        "alpha is down\n"
+        "  status page: https://ops.example/?robot=alpha\n"
+    )
+    assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR, ROBOT_DOWN)) == (
+        "alpha: 2 firing, 0 resolved"
+    )
+
+
+def test_template_marks_resolved_alerts_and_leaves_out_an_empty_message(tmp_path: Any) -> None:
+    quiet = {**BATTERY_ERROR, "annotations": {**BATTERY_ERROR["annotations"], "message": ""}}
+    assert render(tmp_path, "overseer.title", notification(quiet, status="resolved")) == (
+        "alpha: Power/Battery ERROR (resolved)"
+    )

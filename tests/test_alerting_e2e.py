@@ -15,7 +15,9 @@ README and takes about 2 and 8 minutes.
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -27,7 +29,14 @@ import pytest
 
 from support.alertmanager import example_config, running_alertmanager
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
-from support.prometheus import Prometheus, load_rules, parse_duration, running_prometheus, shipped_config
+from support.prometheus import (
+    REPO,
+    Prometheus,
+    load_rules,
+    parse_duration,
+    running_prometheus,
+    shipped_config,
+)
 from support.webhook import ReceivedAlert, WebhookReceiver, running_webhook
 
 ROBOT, COMPONENT, DOWN_ROBOT = "robot1", "/Laser/Laser1", "robot2"
@@ -241,3 +250,105 @@ def stale_alerts(alerts: list[dict[str, Any]], robot: str) -> list[dict[str, Any
         for alert in alerts
         if alert["labels"]["alertname"] == "RosComponentStale" and alert["labels"].get("robot") == robot
     ]
+
+
+BATTERY_ROBOT, BATTERY = "alpha1", "/Power/Robot Battery"  # the simulator's battery says "Battery critical"
+EXTERNAL_URL = "https://ops.example/overseer"
+TEMPLATE = REPO / "alert_rules" / "overseer.tmpl"
+# What the example's comment tells operators to put in a chat receiver; here Slack's "API" is the webhook.
+CHAT_TITLE, CHAT_TEXT = '{{ template "overseer.title" . }}', '{{ template "overseer.text" . }}'
+
+
+def test_battery_error_notifies_with_its_message_and_a_link_to_the_robot_rendered_by_the_shipped_template(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    profile = PROFILES["suite"]
+    with running_webhook() as webhook:
+        alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
+        (critical,) = [r for r in alertmanager_config["receivers"] if r["name"] == "fleet-critical"]
+        chat_config = {"api_url": f"{webhook.url}/chat", "title": CHAT_TITLE, "text": CHAT_TEXT}
+        critical["slack_configs"] = [chat_config]
+        exporter_args = [
+            f"--fleet.stale-after={profile.stale_after}s",
+            f"--fleet.robot-timeout={profile.robot_timeout}s",
+            f"--web.external-url={EXTERNAL_URL}",
+        ]
+        fleet = [
+            "--robots=1",
+            "--components=5",
+            "--warn=0",
+            "--error=0",
+            "--namespace-prefix=alpha",
+            f"--event={FLIP_AT}:{BATTERY_ROBOT}:{BATTERY}:ERROR",
+        ]
+        with (
+            running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
+            running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
+        ):
+            prometheus_config = shipped_config(
+                profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
+            )
+            limits = budget(prometheus_config, alertmanager_config, profile)
+            with (
+                running_prometheus(tmp_path, prometheus_config) as prometheus,
+                running_simulator(tmp_path, dds_domain, *fleet),
+                explained_failures(webhook, prometheus, exporter),
+            ):
+                fired = notification(
+                    webhook,
+                    "firing",
+                    FLIP_AT + SLACK + limits.error,
+                    alertname="RosComponentError",
+                    robot=BATTERY_ROBOT,
+                    component=BATTERY,
+                )
+                chat = wait_for(
+                    lambda: chat_text_with(webhook, f"{BATTERY_ROBOT}: Power/Robot Battery ERROR"),
+                    SLACK,
+                    message="the chat notification of the battery",
+                )
+    assert fired.annotations["message"] == "Battery critical"
+    assert fired.annotations["status_page_url"] == f"{EXTERNAL_URL}/?robot={BATTERY_ROBOT}"
+    assert "reports ERROR: Battery critical." in fired.annotations["description"]
+    # Alertmanager rendered the shipped template into the chat notification: the battery's line and its links.
+    lines = chat["text"].splitlines()
+    battery_line = f"{BATTERY_ROBOT}: Power/Robot Battery ERROR — Battery critical"
+    at = lines.index(battery_line)
+    assert lines[at + 1 : at + 3] == [
+        f"  status page: {EXTERNAL_URL}/?robot={BATTERY_ROBOT}",
+        "  runbook: docs/runbook.md#roscomponenterror",
+    ]
+    # The webhook got the same notification as JSON: amtool renders it with the template to the same text.
+    assert render_template(tmp_path, CHAT_TEXT, fired.notification) == chat["text"]
+    assert render_template(tmp_path, CHAT_TITLE, fired.notification) == chat["title"]
+
+
+def chat_text_with(webhook: WebhookReceiver, line: str) -> dict[str, Any] | None:
+    """The first attachment of a chat notification whose text holds `line`, if any arrived."""
+    for body in webhook.bodies("/chat"):
+        for attachment in body.get("attachments", []):
+            if line in attachment.get("text", ""):
+                return dict(attachment)
+    return None
+
+
+def render_template(tmp_path: Path, text: str, data: dict[str, Any]) -> str:
+    """`text` rendered by `amtool template render` with the shipped templates and `data`."""
+    data_path = tmp_path / "notification.json"
+    data_path.write_text(json.dumps(data), encoding="utf-8")
+    result = subprocess.run(
+        [
+            "amtool",
+            "template",
+            "render",
+            f"--template.glob={TEMPLATE}",
+            f"--template.text={text}",
+            f"--template.data={data_path}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout

@@ -14,6 +14,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve import exposition as exposition_module
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MESSAGE_LABEL_MODES, MessageLabels
 from overseer.serve.metrics import FleetCollector
 
 
@@ -30,6 +31,9 @@ class Clock:
 
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,", "tab\there", "", "\ufffd"]
+# Status messages go into a label too: besides the hostile names, a lone surrogate (not encodable as
+# UTF-8), a long message with a wide character at the cut, and a message full of escapes.
+HOSTILE_MESSAGES = [*HOSTILE, "lone \ud800 surrogate", "x" * 98 + "🤖☃" + "y" * 50, '\\"\n' * 60]
 
 
 def fleet() -> tuple[FleetModel, Clock]:
@@ -47,6 +51,10 @@ def fleet() -> tuple[FleetModel, Clock]:
                 "m1",
                 (("nan", "nan"), ("inf", "-inf"), ("big", "1e300"), ("z", "0"), ("nz", "-0")),
             ),
+            *(
+                DiagnosticStatus(1 + index % 3, f"/Message/{number}", message, "", ())
+                for number, message in enumerate(HOSTILE_MESSAGES)
+            ),
         )
         model.apply(f"robot{index}/{name}", DiagnosticArray(0, 0, "", statuses), "dds")
     model.count_message("ros1", "decode_error")
@@ -55,18 +63,48 @@ def fleet() -> tuple[FleetModel, Clock]:
     return model, clock
 
 
-def both(model: FleetModel, exposition: FleetExposition, value_keys: str = ".*") -> tuple[bytes, bytes]:
+def both(
+    model: FleetModel,
+    exposition: FleetExposition,
+    value_keys: str = ".*",
+    messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+    external_url: str | None = None,
+) -> tuple[bytes, bytes]:
     registry = CollectorRegistry()
-    registry.register(FleetCollector(model, re.compile(value_keys), ["dds"]))
+    collector = FleetCollector(
+        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
+    )
+    registry.register(collector)
     return exposition.render(), generate_latest(registry)
 
 
-@pytest.mark.parametrize("value_keys", [".*", "v|big"])
-def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(value_keys: str) -> None:
+@pytest.mark.parametrize(
+    ("value_keys", "messages", "external_url"),
+    [
+        (".*", MessageLabels(), None),
+        ("v|big", MessageLabels(), None),
+        (".*", MessageLabels("all", 20), 'https://ops.example/over"seer\\\n'),
+        (".*", MessageLabels("none"), "http://127.0.0.1:9849"),
+    ],
+)
+def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(
+    value_keys: str, messages: MessageLabels, external_url: str | None
+) -> None:
     model, clock = fleet()
-    exposition = FleetExposition(model, re.compile(value_keys), ["dds"])
-    fast, reference = both(model, exposition, value_keys)
+    exposition = FleetExposition(
+        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
+    )
+
+    def both_now() -> tuple[bytes, bytes]:
+        return both(model, exposition, value_keys, messages, external_url)
+
+    fast, reference = both_now()
     assert fast == reference
+    # 8 robots of 13 components; the first component of robots 0 and 4 is the only one at OK.
+    assert (
+        fast.count(b"ros_diagnostics_status_message{")
+        == {"none": 0, "problems": 102, "all": 104}[messages.mode]
+    )
     steps = [
         lambda: model.apply(
             "robot1/back\\slash", DiagnosticArray(0, 0, "", (DiagnosticStatus(2, "/new", "", "", ()),)), "dds"
@@ -81,7 +119,7 @@ def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(v
     ]
     for step in steps:
         step()
-        fast, reference = both(model, exposition, value_keys)
+        fast, reference = both_now()
         assert fast == reference
 
 
@@ -125,7 +163,7 @@ _statuses = st.lists(
         DiagnosticStatus,
         level=st.integers(0, 3),
         name=st.sampled_from(["/a", "/b", "/c", 'q"uote', "/\u2603"]),
-        message=st.sampled_from(["", "ok", "hot"]),
+        message=st.sampled_from(["", "ok", "hot", *HOSTILE_MESSAGES]),
         hardware_id=st.sampled_from(["", "hw"]),
         values=st.lists(
             st.tuples(st.sampled_from(["v", "t"]), st.sampled_from(["1", "2.5", "x", "nan"])), max_size=2
@@ -144,11 +182,21 @@ _steps = st.one_of(
 
 
 @settings(max_examples=300, deadline=None)
-@given(steps=st.lists(_steps, min_size=1, max_size=12))
-def test_cached_exposition_equals_collector_through_any_changes(steps: list[tuple[object, ...]]) -> None:
+@given(
+    steps=st.lists(_steps, min_size=1, max_size=12),
+    messages=st.builds(
+        MessageLabels, mode=st.sampled_from(MESSAGE_LABEL_MODES), length=st.sampled_from([1, 2, 5, 100])
+    ),
+    external_url=st.sampled_from([None, "http://127.0.0.1:9849", 'https://x/"\\\n']),
+)
+def test_cached_exposition_equals_collector_through_any_changes(
+    steps: list[tuple[object, ...]], messages: MessageLabels, external_url: str | None
+) -> None:
     clock = Clock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    exposition = FleetExposition(
+        model, re.compile(".*"), ["dds"], messages=messages, external_url=external_url
+    )
     for step in steps:
         match step:
             case ("apply", str(robot), tuple(statuses)):
@@ -161,7 +209,7 @@ def test_cached_exposition_equals_collector_through_any_changes(steps: list[tupl
                 model.expire()
             case ("forget", str(robot)):
                 model.forget_topic(robot, "t")
-        fast, reference = both(model, exposition)
+        fast, reference = both(model, exposition, messages=messages, external_url=external_url)
         assert fast == reference
 
 

@@ -13,6 +13,7 @@ from prometheus_client.registry import CollectorRegistry
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.serve.metrics import FleetCollector, numeric_value
 
 GOLDEN = Path(__file__).parent / "golden" / "metrics.txt"
@@ -23,6 +24,7 @@ CONTRACT = {
     "ros_diagnostics_robot_last_message_timestamp_seconds": "gauge",
     "ros_diagnostics_level_changes": "counter",
     "ros_diagnostics_value": "gauge",
+    "ros_diagnostics_status_message": "gauge",
     "overseer_messages": "counter",
     "overseer_build_info": "gauge",
 }
@@ -41,14 +43,20 @@ class Clock:
 
 
 def fleet_registry(
-    statuses: dict[str, list[DiagnosticStatus]], value_keys: str = ".*"
+    statuses: dict[str, list[DiagnosticStatus]],
+    value_keys: str = ".*",
+    messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+    external_url: str | None = None,
 ) -> tuple[CollectorRegistry, FleetModel, Clock]:
     clock = Clock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
     for robot, items in statuses.items():
         model.apply(robot, DiagnosticArray(0, 0, "", tuple(items)), "dds")
     registry = CollectorRegistry()
-    registry.register(FleetCollector(model, re.compile(value_keys), ["dds"]))
+    collector = FleetCollector(
+        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
+    )
+    registry.register(collector)
     return registry, model, clock
 
 
@@ -176,3 +184,87 @@ def test_golden_exposition_passes_promtool() -> None:
         ["promtool", "check", "metrics"], input=GOLDEN.read_bytes(), capture_output=True, timeout=60
     )
     assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def status_messages(registry: CollectorRegistry) -> dict[tuple[str, str], str]:
+    """(robot, component) → message label of every ros_diagnostics_status_message sample (value 1)."""
+    found = {}
+    for family in text_string_to_metric_families(generate_latest(registry).decode()):
+        for sample in family.samples:
+            if sample.name == "ros_diagnostics_status_message":
+                assert sample.value == 1
+                found[(sample.labels["robot"], sample.labels["component"])] = sample.labels["message"]
+    return found
+
+
+def test_status_messages_are_labels_of_the_components_not_ok_by_default() -> None:
+    registry, _, _ = fleet_registry(PAPER_FLEET)
+    assert status_messages(registry) == {
+        ("robot1", "/Temp/Sensor1"): "High temperature",
+        ("site_a/robot7", "/Camera/Cam1"): "No frames received",
+    }
+
+
+def test_status_message_series_follow_the_configured_mode() -> None:
+    every, _, _ = fleet_registry(PAPER_FLEET, messages=MessageLabels("all"))
+    assert status_messages(every)[("robot1", "/Power/Robot Battery")] == "Charge OK"
+    assert len(status_messages(every)) == 3
+    none, _, _ = fleet_registry(PAPER_FLEET, messages=MessageLabels("none"))
+    assert status_messages(none) == {}
+
+
+def test_a_component_back_to_ok_loses_its_status_message_series() -> None:
+    registry, model, _ = fleet_registry(PAPER_FLEET)
+    recovered = PAPER_FLEET["robot1"][1]._replace(level=0, message="Normal")
+    model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0], recovered)), "dds")
+    assert ("robot1", "/Temp/Sensor1") not in status_messages(registry)
+
+
+@pytest.mark.parametrize(
+    ("message", "length", "label"),
+    [
+        ("battery critically low (4 %)", 100, "battery critically low (4 %)"),
+        ("x" * 100, 100, "x" * 100),
+        ("x" * 101, 100, "x" * 99 + "…"),
+        ("ロボット" * 30, 10, "ロボットロボットロ…"),
+        ("🤖🤖🤖", 2, "🤖…"),
+        ("abc", 1, "…"),
+        ("lone \ud800 and \udfff surrogates", 100, "lone \ufffd and \ufffd surrogates"),
+    ],
+)
+def test_message_label_is_cut_on_a_character_boundary_and_valid_utf8(
+    message: str, length: int, label: str
+) -> None:
+    value = message_label_value(message, length)
+    assert value == label
+    assert len(value) <= length
+    value.encode("utf-8")  # would raise on a surrogate
+
+
+HOSTILE_MESSAGES = [*HOSTILE, "lone \ud800 surrogate", "end\\", 'end"', "x" * 100 + "\n"]
+
+
+def test_hostile_status_messages_are_escaped_cut_and_parse_back() -> None:
+    statuses = {
+        "robot1": [
+            DiagnosticStatus(2, f"/C{i}", message, "", ()) for i, message in enumerate(HOSTILE_MESSAGES)
+        ]
+    }
+    registry, _, _ = fleet_registry(statuses, messages=MessageLabels("problems", 100))
+    text = generate_latest(registry)
+    found = status_messages(registry)
+    assert [found[("robot1", f"/C{i}")] for i in range(len(HOSTILE_MESSAGES))] == [
+        message_label_value(message, 100) for message in HOSTILE_MESSAGES
+    ]
+    assert found[("robot1", "/C7")] == "lone \ufffd surrogate"
+    assert found[("robot1", f"/C{len(HOSTILE_MESSAGES) - 1}")] == "x" * 99 + "…"
+    result = subprocess.run(["promtool", "check", "metrics"], input=text, capture_output=True, timeout=60)
+    assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def test_external_url_is_exported_for_alert_links_only_when_configured() -> None:
+    registry, _, _ = fleet_registry(PAPER_FLEET, external_url="https://ops.example/overseer")
+    info = registry.get_sample_value("overseer_web_info", {"external_url": "https://ops.example/overseer"})
+    assert info == 1
+    plain, _, _ = fleet_registry(PAPER_FLEET)
+    assert "overseer_web_info{" not in generate_latest(plain).decode()

@@ -15,6 +15,7 @@ from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import Icinga2Push
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
+from overseer.serve.message_labels import MessageLabels
 from overseer.serve.metrics import FleetCollector
 from overseer.serve.web_config import load_web_config
 from overseer.sources import Source
@@ -50,7 +51,11 @@ class Exporter:
         registry = CollectorRegistry(auto_describe=True)
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern
-        registry.register(FleetCollector(self.model, value_keys, transports))
+        metrics, external_url = self.config.metrics, self.config.web.external_url
+        messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
+        registry.register(
+            FleetCollector(self.model, value_keys, transports, messages=messages, external_url=external_url)
+        )
         extra_collectors: list[Collector] = []
         if self.config.events.enabled:
             self.history = EventHistory(self.config.events, self.model, self.config.log_format == "json")
@@ -60,7 +65,9 @@ class Exporter:
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
         for collector in extra_collectors:
             registry.register(collector)
-        exposition = FleetExposition(self.model, value_keys, transports, extra_collectors)
+        exposition = FleetExposition(
+            self.model, value_keys, transports, extra_collectors, messages=messages, external_url=external_url
+        )
         security = load_web_config(self.config.web.config_file)
         address = self.config.web.host_and_port
         self.server = OverseerServer(address, self.model, registry, exposition, security)

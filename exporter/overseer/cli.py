@@ -133,6 +133,20 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help="a ROS 1 robot by its master, e.g. robot1=http://10.0.0.5:11311; repeat for several",
     )
     parser.add_argument(
+        "--ros-master",
+        dest="ros_masters",
+        action="append",
+        metavar="URL",
+        help="a ROS 1 robot by its master alone, named after the master's host (http://10.0.0.5:11311 is "
+        "robot 10.0.0.5; with one master, --ros1.robot NAME names it); repeat for several",
+    )
+    parser.add_argument(
+        "--web.external-url",
+        dest="external_url",
+        metavar="URL",
+        help="the URL users reach this exporter at, for links to the status page in alerts",
+    )
+    parser.add_argument(
         "--shard",
         metavar="I/N",
         help="follow only the robots whose name hashes to shard I of N (default 0/1)",
@@ -230,14 +244,10 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["dds.peers"] = list(args.dds_peers)
     if args.max_participant_index is not None:
         overrides["dds.max_participant_index"] = args.max_participant_index
-    if args.ros1_robots:
-        robots = []
-        for text in args.ros1_robots:
-            name, sep, uri = text.partition("=")
-            if not sep:
-                raise ConfigError(f"--ros1.robot: expected NAME=MASTER_URI, got {text!r}")
-            robots.append({"name": name, "master_uri": uri})
-        overrides["ros1.robots"] = robots
+    if args.ros1_robots or args.ros_masters:
+        overrides["ros1.robots"] = _ros1_robot_overrides(args.ros1_robots or [], args.ros_masters or [])
+    if args.external_url is not None:
+        overrides["web.external_url"] = args.external_url
     for name in ("stale_after", "robot_timeout", "expire_after"):
         value = getattr(args, name)
         if value is not None:
@@ -265,6 +275,28 @@ def _event_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.events_max_size is not None:
         overrides["events.max_size"] = parse_size(args.events_max_size, "--events.max-size")
     return overrides
+
+
+def _ros1_robot_overrides(named: list[str], masters: list[str]) -> list[dict[str, str]]:
+    """ros1.robots from `--ros1.robot NAME=URI` and `--ros-master URI`; a bare NAME names the one master."""
+    robots = []
+    names_for_master = []
+    for text in named:
+        name, sep, uri = text.partition("=")
+        if sep:
+            robots.append({"name": name, "master_uri": uri})
+        elif len(masters) == 1 and name:
+            names_for_master.append(name)
+        else:
+            raise ConfigError(
+                "--ros1.robot: expected NAME=MASTER_URI (or NAME with exactly one --ros-master), "
+                f"got {text!r}"
+            )
+    if len(names_for_master) > 1:
+        raise ConfigError(f"--ros1.robot: one name for the one --ros-master, got {names_for_master}")
+    for uri in masters:
+        robots.append({"master_uri": uri, **({"name": names_for_master[0]} if names_for_master else {})})
+    return robots
 
 
 def _configure_logging(level: str, log_format: str = "text") -> None:

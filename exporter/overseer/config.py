@@ -14,6 +14,8 @@ import yaml
 
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
+from overseer.ros_master import master_host
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABEL_LENGTH, MESSAGE_LABEL_MODES
 
 if TYPE_CHECKING:
     from overseer.push.icinga2_config import Icinga2Config
@@ -106,6 +108,7 @@ class WebConfig:
 
     listen_address: str = f":{DEFAULT_PORT}"
     config_file: str | None = None
+    external_url: str | None = None  # the URL users reach us at, for links in alerts (no trailing /)
 
     @property
     def host_and_port(self) -> tuple[str, int]:
@@ -118,6 +121,10 @@ class MetricsConfig:
     """What the /metrics view exports beyond levels."""
 
     value_keys: tuple[str, ...] = (".*",)
+    # Which components get ros_diagnostics_status_message (none, problems, all), and how many characters
+    # its message label keeps, "…" included when cut.
+    message_labels: str = "problems"
+    message_label_length: int = DEFAULT_MESSAGE_LABEL_LENGTH
 
     @property
     def value_key_pattern(self) -> re.Pattern[str]:
@@ -273,11 +280,11 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         "",
         {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "events", "log_format", "icinga2"},
     )
-    web = _section(raw, "web", {"listen_address", "config_file"})
+    web = _section(raw, "web", {"listen_address", "config_file", "external_url"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
     fleet = _section(raw, "fleet", {f.name for f in fields(FleetLimits)})
-    metrics = _section(raw, "metrics", {"value_keys"})
+    metrics = _section(raw, "metrics", {"value_keys", "message_labels", "message_label_length"})
 
     config = Config()
     if "listen_address" in web:
@@ -288,6 +295,8 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         config = replace(
             config, web=replace(config.web, config_file=_string(web["config_file"], "web.config_file"))
         )
+    if web.get("external_url") is not None:
+        config = replace(config, web=replace(config.web, external_url=_external_url(web["external_url"])))
     config = replace(
         config,
         dds=_dds_config(dds),
@@ -425,10 +434,10 @@ def _ros1_robot(item: object, key: str) -> Ros1Robot:
     if not isinstance(item, dict):
         raise ConfigError(f"{key}: expected a mapping with name and master_uri, got {item!r}")
     _reject_unknown(item, key + ".", {"name", "master_uri", "topic"})
-    name = _string(item.get("name"), f"{key}.name")
     master_uri = _string(item.get("master_uri"), f"{key}.master_uri")
     if not re.fullmatch(r"https?://[^/\s:]+(:\d+)?/?", master_uri):
         raise ConfigError(f"{key}.master_uri: expected http://HOST:PORT, got {master_uri!r}")
+    name = _string(item["name"], f"{key}.name") if "name" in item else master_host(master_uri)
     topic = _string(item.get("topic", "diagnostics_agg"), f"{key}.topic")
     if topic not in DIAGNOSTIC_TOPICS:
         raise ConfigError(f"{key}.topic: expected diagnostics_agg or diagnostics, got {topic!r}")
@@ -475,9 +484,17 @@ def _fleet_limits(raw: dict[str, Any]) -> FleetLimits:
     return limits
 
 
+def _external_url(value: object) -> str:
+    url = _string(value, "web.external_url")
+    if not re.fullmatch(r"https?://[^/\s?#]+(/[^\s?#]*)?", url):
+        raise ConfigError(f"web.external_url: expected http(s)://HOST[:PORT][/PATH], got {url!r}")
+    return url.rstrip("/")
+
+
 def _metrics_config(raw: dict[str, Any]) -> MetricsConfig:
+    config = _message_labels(raw)
     if "value_keys" not in raw:
-        return MetricsConfig()
+        return config
     patterns = tuple(_string(p, "metrics.value_keys") for p in _list(raw["value_keys"], "metrics.value_keys"))
     for pattern in patterns:
         try:
@@ -486,7 +503,26 @@ def _metrics_config(raw: dict[str, Any]) -> MetricsConfig:
             raise ConfigError(
                 f"metrics.value_keys: {pattern!r} is not a regular expression: {error}"
             ) from None
-    return MetricsConfig(patterns)
+    return replace(config, value_keys=patterns)
+
+
+def _message_labels(raw: dict[str, Any]) -> MetricsConfig:
+    config = MetricsConfig()
+    if "message_labels" in raw:
+        mode = raw["message_labels"]
+        if mode not in MESSAGE_LABEL_MODES:
+            raise ConfigError(
+                f"metrics.message_labels: expected one of {', '.join(MESSAGE_LABEL_MODES)}, got {mode!r}"
+            )
+        config = replace(config, message_labels=mode)
+    if "message_label_length" in raw:
+        length = raw["message_label_length"]
+        if not isinstance(length, int) or isinstance(length, bool) or not 1 <= length <= 1024:
+            raise ConfigError(
+                f"metrics.message_label_length: expected an integer from 1 to 1024, got {length!r}"
+            )
+        config = replace(config, message_label_length=length)
+    return config
 
 
 def _section(raw: dict[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:

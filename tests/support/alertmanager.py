@@ -31,9 +31,11 @@ class Alertmanager(RunningServer):
 def example_config(webhook_url: str, timing: dict[str, str] | None = None) -> dict[str, Any]:
     """The shipped example with every receiver posting to `webhook_url`/<receiver name>.
 
-    `timing` (e.g. group_wait, group_interval) replaces those settings on every route when given.
+    `timing` (e.g. group_wait, group_interval) replaces those settings on every route when given. Template
+    files stay the shipped ones (their paths made absolute, as the config is written elsewhere).
     """
     config: dict[str, Any] = yaml.safe_load(EXAMPLE.read_text(encoding="utf-8"))
+    config["templates"] = [str(EXAMPLE.parent / path) for path in config.get("templates", [])]
     for receiver in config["receivers"]:
         for webhook in receiver["webhook_configs"]:
             webhook["url"] = f"{webhook_url}/{receiver['name']}"

@@ -1,4 +1,8 @@
-"""A small webhook receiver on loopback that records Alertmanager's notifications and when they arrived."""
+"""A small webhook receiver on loopback that records Alertmanager's notifications and when they arrived.
+
+Besides webhook notifications it keeps every JSON body posted to it, such as a Slack notification that
+Alertmanager rendered from templates (a `slack_configs` receiver whose api_url points here).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
@@ -20,6 +24,8 @@ class ReceivedAlert:
     status: str
     labels: dict[str, str]
     received_at: float
+    annotations: dict[str, str] = field(default_factory=dict)
+    notification: dict[str, Any] = field(default_factory=dict)  # the whole webhook body it came in
 
 
 class WebhookReceiver:
@@ -29,6 +35,7 @@ class WebhookReceiver:
         """Start listening on a free loopback port (served once `serve_forever` runs)."""
         self._lock = threading.Lock()
         self._alerts: list[ReceivedAlert] = []
+        self._bodies: list[tuple[str, dict[str, Any]]] = []
         self.server = ThreadingHTTPServer(("127.0.0.1", 0), self._handler())
         self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
 
@@ -50,12 +57,21 @@ class WebhookReceiver:
         return Handler
 
     def record(self, path: str, payload: dict[str, Any], received_at: float) -> None:
-        """Store the alerts of one webhook payload."""
+        """Store the alerts of one webhook payload (none for other JSON bodies, which are kept whole)."""
         alerts = [
-            ReceivedAlert(path, alert["status"], alert["labels"], received_at) for alert in payload["alerts"]
+            ReceivedAlert(
+                path, alert["status"], alert["labels"], received_at, alert.get("annotations", {}), payload
+            )
+            for alert in payload.get("alerts", [])
         ]
         with self._lock:
             self._alerts.extend(alerts)
+            self._bodies.append((path, payload))
+
+    def bodies(self, path: str) -> list[dict[str, Any]]:
+        """Every JSON body posted to `path`, in arrival order."""
+        with self._lock:
+            return [body for where, body in self._bodies if where == path]
 
     def alerts(self, **labels: str) -> list[ReceivedAlert]:
         """The alerts received so far whose labels include `labels`."""

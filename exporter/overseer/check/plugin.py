@@ -36,7 +36,7 @@ USAGE = f"""Usage:
    [-n <text>] [--name-regex <regex>] [--stale-state unknown|warning|critical] [--perfdata-values]
    [--authorization-file <file> | -a <user:password>] [--ca-file <file>] [--insecure]
    [--client-cert <file> [--client-key <file>]] [-t <seconds>] [-v] [-V] [-h]
- {PROGRAM} --ros-master <ROS 1 master URL> [--ros-topic diagnostics_agg|diagnostics] -r <robot> [...]"""
+ {PROGRAM} --ros-master <ROS 1 master URL> [--ros-topic diagnostics_agg|diagnostics] [-r <robot>] [...]"""
 
 HELP = f"""{PROGRAM} {__version__} (Overseer)
 Checks one ROS robot's diagnostics as the Overseer exporter sees them (its JSON API, so the same
@@ -57,7 +57,8 @@ Options:
  --url=URL
     Base URL of the exporter instead of -H/-p, e.g. https://overseer.example:9849 or a proxy path
  -r, --robot=NAME
-    The robot as the exporter names it (its ROS namespace, e.g. robot1 or site_a/robot7)
+    The robot as the exporter names it (its ROS namespace, e.g. robot1 or site_a/robot7). With
+    --ros-master it defaults to the master's host (10.0.0.5), as `overseer run --ros-master` names it
  --ros-master=URL
     No exporter: read one message straight from a ROS 1 robot's master and publisher, as the
     paper's plugin did (e.g. http://10.0.0.5:11311); same output, waits at most --timeout
@@ -235,6 +236,10 @@ def next_value(option: str, pending: list[str]) -> str:
 def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
     """Validated options; CheckError naming the first bad one."""
     robot = flags.get("--robot", "")
+    if not robot and flags.get("--ros-master"):
+        from overseer.ros_master import master_host
+
+        robot = master_host(flags["--ros-master"])
     if not robot:
         raise CheckError("no robot given: use -r/--robot (see --help)")
     settings = Settings(

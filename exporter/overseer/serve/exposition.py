@@ -22,6 +22,7 @@ from prometheus_client.utils import floatToGoString
 from overseer import __version__
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.serve.metrics import DROP_REASONS, NumericValues, _Families, message_counts
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
@@ -39,11 +40,11 @@ def escape_label_value(value: str) -> str:
 class _RobotLines:
     """One robot's rendered per-component lines and what they were rendered for.
 
-    `levels`, `changes` and `values` hold every component's lines of each family; component i's lines
-    of family k start at `offsets[3 * i + k]`. `components` are the records they were rendered from
-    (None for those missing from the latest message): a component whose record is the same object
-    again renders the same lines (when the robot's up and freshness did not change), so they are
-    copied instead.
+    `levels`, `changes`, `values` and `messages` hold every component's lines of each family;
+    component i's lines of family k start at `offsets[FAMILIES * i + k]`. `components` are the records
+    they were rendered from (None for those missing from the latest message): a component whose record
+    is the same object again renders the same lines (when the robot's up and freshness did not change),
+    so they are copied instead.
     """
 
     signature: tuple[int, bool, bool, int]
@@ -53,6 +54,7 @@ class _RobotLines:
     levels: bytes
     changes: bytes
     values: bytes
+    messages: bytes
     components: tuple[Component | None, ...]
     offsets: array[int]
 
@@ -66,12 +68,15 @@ class FleetExposition:
         value_keys: re.Pattern[str],
         transports: Iterable[str],
         extra_collectors: Iterable[Collector] = (),
+        *,
+        messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+        external_url: str | None = None,
     ) -> None:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
-        `extra_collectors` (small ones: the event history's, the Icinga 2 push's) are rendered by
-        prometheus-client and appended after the fleet: what a registry with the fleet's collector first,
-        then them, renders.
+        `messages` and `external_url` as for `FleetCollector`. `extra_collectors` (small ones: the event
+        history's, the Icinga 2 push's) are rendered by prometheus-client and appended after the fleet:
+        what a registry with the fleet's collector first, then them, renders.
         """
         self._extra = CollectorRegistry(auto_describe=False)
         for collector in extra_collectors:
@@ -79,6 +84,12 @@ class FleetExposition:
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
+        self._messages = messages
+        self._web_info = (
+            ""
+            if external_url is None
+            else f'overseer_web_info{{external_url="{escape_label_value(external_url)}"}} 1.0\n'
+        )
         self._headers = {
             metric.name: _header(metric.name, metric.type, metric.documentation)
             for metric in _Families.create().all()
@@ -92,9 +103,9 @@ class FleetExposition:
             return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
-        render = _RenderCache(NumericValues(self._value_keys))
+        render = _RenderCache(NumericValues(self._value_keys), self._messages)
         previous, current = self._robots, {}
-        levels, changes, values = [], [], []
+        levels, changes, values, messages = [], [], [], []
         robot_level, robot_up, last_message = [], [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
@@ -106,6 +117,7 @@ class FleetExposition:
             levels.append(lines.levels)
             changes.append(lines.changes)
             values.append(lines.values)
+            messages.append(lines.messages)
             robot_level.append(f"ros_diagnostics_robot_level{label}{go_float(float(lines.robot_level))}\n")
             robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
             if robot.last_message is not None:
@@ -135,6 +147,8 @@ class FleetExposition:
             )
         tail.append(headers["overseer_build_info"])
         tail.append(f'overseer_build_info{{version="{escape_label_value(__version__)}"}} 1.0\n')
+        tail.append(headers["overseer_web_info"])
+        tail.append(self._web_info)
         return b"".join(
             [
                 headers["ros_diagnostics_level"].encode(),
@@ -148,6 +162,8 @@ class FleetExposition:
                 *changes,
                 headers["ros_diagnostics_value"].encode(),
                 *values,
+                headers["ros_diagnostics_status_message"].encode(),
+                *messages,
                 "".join(tail).encode(),
                 generate_latest(self._extra),  # joined here, not appended: no copy of the whole body
             ]
@@ -169,7 +185,8 @@ def _lines_for(
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
     # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
-    escape, number, pairs = render.escape, render.number, render.numbers.pairs
+    escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
+    message_prefix = "ros_diagnostics_status_message{"
     robot_label = f'robot="{escape(robot.name)}"'
     reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
     lines = _LinesBuilder(cached)
@@ -194,13 +211,17 @@ def _lines_for(
                 for key, value in pairs(component.values)
             ]
         )
+        message = message_label(component)
         lines.add(
             index,
             f"ros_diagnostics_level{labels}{_LEVEL_VALUES[levels[index]]}\n".encode(),
             f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode(),
             values.encode(),
+            b""
+            if message is None
+            else f'{message_prefix}{identity},message="{message}",{robot_label}}} 1.0\n'.encode(),
         )
-    level_lines, changes, values_lines, offsets = lines.finish(len(levels))
+    level_lines, changes, values_lines, message_lines, offsets = lines.finish(len(levels))
     # A component missing from the latest message renders by its own time: never copied (None).
     records = (
         tuple(component if key not in missing else None for key, component in items)
@@ -215,52 +236,68 @@ def _lines_for(
         level_lines,
         changes,
         values_lines,
+        message_lines,
         records,
         offsets,
     )
 
 
+FAMILIES = 4  # per-component families: levels, level changes, values, status messages
+
+
 class _LinesBuilder:
-    """Builds a robot's three families of lines from new lines and, between them, the cached ones."""
+    """Builds a robot's per-component families of lines from new lines and, between them, the cached ones."""
 
     def __init__(self, cached: _RobotLines | None) -> None:
         self._cached = cached
-        self._pieces: tuple[list[bytes], list[bytes], list[bytes]] = ([], [], [])
-        self._sizes = [0, 0, 0]
+        self._pieces: tuple[list[bytes], ...] = tuple([] for _ in range(FAMILIES))
+        self._sizes = [0] * FAMILIES
         self._offsets = array("I", self._sizes)
         self._next = 0  # the first component not yet in the pieces
 
-    def add(self, index: int, *family_lines: bytes) -> None:
+    def add(self, index: int, levels: bytes, changes: bytes, values: bytes, message: bytes) -> None:
         """Component `index`'s freshly rendered lines, one bytes per family; those before it come cached."""
-        self._copy_cached(index)
-        for family, text in enumerate(family_lines):
-            self._pieces[family].append(text)
-            self._sizes[family] += len(text)
-        self._offsets.extend(self._sizes)
+        if index != self._next:
+            self._copy_cached(index)
+        # Unrolled: this runs for every component rendered, and most have no values or message line.
+        pieces, sizes = self._pieces, self._sizes
+        pieces[0].append(levels)
+        sizes[0] += len(levels)
+        pieces[1].append(changes)
+        sizes[1] += len(changes)
+        if values:
+            pieces[2].append(values)
+            sizes[2] += len(values)
+        if message:
+            pieces[3].append(message)
+            sizes[3] += len(message)
+        self._offsets.extend(sizes)
         self._next = index + 1
 
-    def finish(self, count: int) -> tuple[bytes, bytes, bytes, array[int]]:
+    def finish(self, count: int) -> tuple[bytes, bytes, bytes, bytes, array[int]]:
         """The families' bytes for `count` components, and where every component's lines start."""
         self._copy_cached(count)
-        levels, changes, values = (b"".join(pieces) for pieces in self._pieces)
-        return levels, changes, values, self._offsets
+        levels, changes, values, messages = (b"".join(pieces) for pieces in self._pieces)
+        return levels, changes, values, messages, self._offsets
 
     def _copy_cached(self, stop: int) -> None:
         """Copy the cached lines of components `self._next` to `stop` (where they had the same index)."""
         if stop == self._next or self._cached is None:
             return
-        cached, first, last = self._cached, 3 * self._next, 3 * stop
+        cached, first, last = self._cached, FAMILIES * self._next, FAMILIES * stop
         old = cached.offsets
         shifts = []
-        for family, text in enumerate((cached.levels, cached.changes, cached.values)):
+        for family, text in enumerate((cached.levels, cached.changes, cached.values, cached.messages)):
             start, end = old[first + family], old[last + family]
             self._pieces[family].append(text[start:end])
             shifts.append(self._sizes[family] - start)
             self._sizes[family] += end - start
         if any(shifts):
-            self._offsets.extend([old[i] + shifts[i % 3] for i in range(first + 3, last + 3)])
+            self._offsets.extend(
+                [old[i] + shifts[i % FAMILIES] for i in range(first + FAMILIES, last + FAMILIES)]
+            )
         else:
-            self._offsets.extend(old[first + 3 : last + 3])
+            self._offsets.extend(old[first + FAMILIES : last + FAMILIES])
         self._next = stop
 
 
@@ -270,8 +307,12 @@ _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
 class _RenderCache:
     """Memoized escaping and number formatting for one render."""
 
-    def __init__(self, numbers: NumericValues) -> None:
+    def __init__(self, numbers: NumericValues, messages: MessageLabels) -> None:
         self.numbers = numbers
+        self._message_length = messages.length
+        # MessageLabels.wants, inlined (it runs for every component rendered); the tests hold them equal.
+        self._all_messages, self._problem_messages = messages.mode == "all", messages.mode == "problems"
+        self._message_labels: dict[str, str] = {}
         self._escaped: dict[str, str] = {}
         self._formatted: dict[float, str] = {}
 
@@ -280,6 +321,17 @@ class _RenderCache:
         if escaped is None:
             escaped = self._escaped[text] = escape_label_value(text)
         return escaped
+
+    def message(self, component: Component) -> str | None:
+        """The escaped message label of `component`'s status-message line, or None for no line."""
+        if not (self._all_messages or (self._problem_messages and component.level)):
+            return None
+        text = component.message
+        label = self._message_labels.get(text)
+        if label is None:
+            label = escape_label_value(message_label_value(text, self._message_length))
+            self._message_labels[text] = label
+        return label
 
     def number(self, value: float) -> str:
         if not value:  # 0.0 == -0.0 as keys, but they render differently

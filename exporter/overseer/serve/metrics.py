@@ -20,6 +20,7 @@ from prometheus_client.registry import Collector
 
 from overseer import __version__
 from overseer.model import FleetModel, FleetSnapshot, RobotState
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 
 MESSAGE_RESULTS = ("received", "decode_error", "dropped")
 DROP_REASONS = ("robot_limit", "component_limit", "value_limit", "invalid_level")
@@ -47,11 +48,25 @@ def numeric_value(text: str) -> float | None:
 class FleetCollector(Collector):
     """Exports the fleet model as the metric contract of ARCHITECTURE.md."""
 
-    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
-        """Collect from `model`, exporting key-values whose key fully matches `value_keys`."""
+    def __init__(
+        self,
+        model: FleetModel,
+        value_keys: re.Pattern[str],
+        transports: Iterable[str],
+        *,
+        messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+        external_url: str | None = None,
+    ) -> None:
+        """Collect from `model`, exporting key-values whose key fully matches `value_keys`.
+
+        `messages` chooses the components with a status-message series; `external_url`, when given,
+        is exported in `overseer_web_info` for alert links.
+        """
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
+        self._messages = messages
+        self._external_url = external_url
 
     def describe(self) -> Iterator[Metric]:
         """The families this collector exports, without taking a snapshot."""
@@ -68,13 +83,15 @@ class FleetCollector(Collector):
             families.robot_level.add_metric([name], float(snapshot.robot_level(robot)))
             if robot.last_message is not None:
                 families.last_message.add_metric([name], robot.last_message)
-            samples = robot_samples(snapshot, robot, numbers)
+            samples = robot_samples(snapshot, robot, numbers, self._messages)
             for labels, sample in samples.levels:
                 families.level.add_metric(list(labels), sample)
             for labels, sample in samples.changes:
                 families.changes.add_metric(list(labels), sample)
             for value_labels, sample in samples.values:
                 families.value.add_metric(list(value_labels), sample)
+            for message_labels in samples.messages:
+                families.status_message.add_metric(list(message_labels), 1.0)
         for (transport, result), count in message_counts(snapshot, self._transports):
             families.messages.add_metric([transport, result], float(count))
         for reason in DROP_REASONS:
@@ -83,6 +100,8 @@ class FleetCollector(Collector):
         for (transport, reason), count in sorted(snapshot.source_errors.items()):
             families.source_errors.add_metric([transport, reason], float(count))
         families.build.add_metric([__version__], 1.0)
+        if self._external_url is not None:
+            families.web_info.add_metric([self._external_url], 1.0)
         yield from families.all()
 
 
@@ -116,19 +135,28 @@ class RobotSamples:
     levels: list[tuple[tuple[str, str, str], float]]
     changes: list[tuple[tuple[str, str, str], float]]
     values: list[tuple[tuple[str, str, str, str], float]]
+    messages: list[tuple[str, str, str, str]]  # status-message series, value 1
 
 
-def robot_samples(snapshot: FleetSnapshot, robot: RobotState, numbers: NumericValues) -> RobotSamples:
+def robot_samples(
+    snapshot: FleetSnapshot,
+    robot: RobotState,
+    numbers: NumericValues,
+    messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+) -> RobotSamples:
     """The per-component samples of one robot at the snapshot's time."""
     up = snapshot.robot_up(robot)
     name = robot.name
-    samples = RobotSamples([], [], [])
+    samples = RobotSamples([], [], [], [])
     for key, component in robot.components.items():
         labels = (name, component.name, component.hardware_id)
         samples.levels.append((labels, float(snapshot.component_level(robot, key, component, up))))
         samples.changes.append((labels, float(component.level_changes)))
         for value_key, number in numbers.pairs(component.values):
             samples.values.append(((*labels, value_key), number))
+        message = messages.label(component)
+        if message is not None:
+            samples.messages.append((*labels, message))
     return samples
 
 
@@ -151,11 +179,13 @@ class _Families:
     last_message: GaugeMetricFamily
     changes: CounterMetricFamily
     value: GaugeMetricFamily
+    status_message: GaugeMetricFamily
     messages: CounterMetricFamily
     dropped: CounterMetricFamily
     truncated: CounterMetricFamily
     source_errors: CounterMetricFamily
     build: GaugeMetricFamily
+    web_info: GaugeMetricFamily
 
     def all(self) -> tuple[Metric, ...]:
         """Every family, in exposition order."""
@@ -195,6 +225,12 @@ class _Families:
                 "Numeric key-values of a component's status, for the keys the configuration allows.",
                 labels=[*_COMPONENT_LABELS, "key"],
             ),
+            GaugeMetricFamily(
+                "ros_diagnostics_status_message",
+                "A component's status message as a label, cut to metrics.message_label_length; always 1. "
+                "Only for the components metrics.message_labels chooses (default: reported not OK).",
+                labels=[*_COMPONENT_LABELS, "message"],
+            ),
             CounterMetricFamily(
                 "overseer_messages",
                 "Diagnostics messages by transport and result: received, decode_error or dropped.",
@@ -214,4 +250,9 @@ class _Families:
                 labels=["transport", "reason"],
             ),
             GaugeMetricFamily("overseer_build_info", "Overseer's version; always 1.", labels=["version"]),
+            GaugeMetricFamily(
+                "overseer_web_info",
+                "The URL users reach this exporter at (web.external_url), for links in alerts; always 1.",
+                labels=["external_url"],
+            ),
         )
