@@ -8,7 +8,7 @@ from hashlib import blake2b
 from itertools import pairwise
 from typing import NamedTuple
 
-from overseer.codec import DecodeError
+from overseer.codec import DecodeError, compiled
 from overseer.codec.wire import StatusReader, WireFormat, decode_laid_out
 from overseer.messages import DiagnosticStatus
 from overseer.model import FleetModel
@@ -97,21 +97,14 @@ class PayloadIngest:
         if end < pos or payload[:start] != layout.prefix or hash(payload[stop:pos]) != layout.head_hash:
             return None  # another header or status count
         misaligned = wire.alignment - 1
-        read_status = layout.read_status
-        changed: list[tuple[int, DiagnosticStatus]] = []
-        shift = 0  # how much later than in the last payload the statuses now sit
         # The bounds and hashes are updated in place: a failure below drops the layout.
-        for index, old_hash in enumerate(hashes):
-            after = bounds[index + 1] + shift
-            if shift & misaligned or hash(payload[pos:after]) != old_hash:
-                status, after = read_status(payload, pos, end)
-                changed.append((index, status))
-                hashes[index] = hash(payload[pos:after])
-                shift = after - bounds[index + 1]
-                bounds[index + 1] = after
-            elif shift:
-                bounds[index + 1] = after
-            pos = after
+        compiled_layout = compiled.LAYOUTS.get(layout.read_status)
+        if compiled_layout is not None:
+            changed, pos = compiled.scan_changed(
+                compiled_layout, payload, pos, end, bounds, hashes, misaligned
+            )
+        else:
+            changed, pos = _scan_changed(layout.read_status, payload, pos, end, bounds, hashes, misaligned)
         if pos > end or (wire.exact_end and pos != end):
             return None
         model = self._model
@@ -126,3 +119,33 @@ class PayloadIngest:
         if revision is None:
             return None
         return layout._replace(revision=revision, fingerprint=fingerprint)
+
+
+def _scan_changed(
+    read_status: StatusReader,
+    payload: bytes,
+    pos: int,
+    end: int,
+    bounds: array[int],
+    hashes: array[int],
+    misaligned: int,
+) -> tuple[list[tuple[int, DiagnosticStatus]], int]:
+    """The statuses that changed since the last payload, and where the last status ended.
+
+    A status whose bytes hash as they did, at an offset that keeps the alignment, is skipped; any other
+    is decoded and its bound and hash updated in place. `compiled.scan_changed` does the same in C.
+    """
+    changed: list[tuple[int, DiagnosticStatus]] = []
+    shift = 0  # how much later than in the last payload the statuses now sit
+    for index, old_hash in enumerate(hashes):
+        after = bounds[index + 1] + shift
+        if shift & misaligned or hash(payload[pos:after]) != old_hash:
+            status, after = read_status(payload, pos, end)
+            changed.append((index, status))
+            hashes[index] = hash(payload[pos:after])
+            shift = after - bounds[index + 1]
+            bounds[index + 1] = after
+        elif shift:
+            bounds[index + 1] = after
+        pos = after
+    return changed, pos
