@@ -16,6 +16,7 @@ import sys
 from array import array
 from collections.abc import Callable
 from itertools import pairwise
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -27,6 +28,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.sources import ingest
 from support import strategies
 from support.codec_paths import codec_path
+from support.processes import running_exporter, wait_for
 
 FUZZ = settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -139,6 +141,19 @@ print(compiled.AVAILABLE, compiled.implementation(), refused, int(level))
         [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
     )
     assert result.stdout.split() == ["False", "python", "True", "2"]
+
+
+@pytest.mark.parametrize("pure_python", [False, True], ids=["compiled", "pure-python"])
+def test_the_exporter_logs_and_exports_which_decoder_it_runs(
+    tmp_path: Path, dds_domain: int, monkeypatch: pytest.MonkeyPatch, pure_python: bool
+) -> None:
+    monkeypatch.setenv(compiled.PURE_PYTHON_VARIABLE, "1" if pure_python else "0")
+    codec = "python" if pure_python else "compiled"
+    with running_exporter(tmp_path, dds_domain) as exporter:
+        build_info = {dict(labels)["codec"] for labels in exporter.samples()["overseer_build_info"]}
+        assert build_info == {codec}
+        line = f"status decoder: {'pure Python' if pure_python else 'compiled'}"
+        wait_for(lambda: line in exporter.log(), timeout=10, message=line)
 
 
 @pytest.mark.parametrize("name", sorted(LAYOUTS))

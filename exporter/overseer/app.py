@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 
 from prometheus_client.registry import CollectorRegistry
 
+from overseer.codec import compiled
 from overseer.config import Config
 from overseer.model import FleetModel
 from overseer.serve.exposition import FleetExposition
@@ -58,6 +59,10 @@ class Exporter:
         threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
+        if compiled.enabled:
+            log.info("%s", compiled.describe())
+        else:
+            log.warning("%s", compiled.describe())
 
     def stop(self) -> None:
         """Stop serving and leave the transports."""

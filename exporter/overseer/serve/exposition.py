@@ -18,6 +18,7 @@ from typing import cast
 from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
+from overseer.codec import compiled
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.serve.metrics import DROP_REASONS, NumericValues, _Families, message_counts
@@ -118,7 +119,10 @@ class FleetExposition:
                 f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
             )
         tail.append(headers["overseer_build_info"])
-        tail.append(f'overseer_build_info{{version="{escape_label_value(__version__)}"}} 1.0\n')
+        tail.append(
+            f'overseer_build_info{{codec="{compiled.implementation()}",'
+            f'version="{escape_label_value(__version__)}"}} 1.0\n'
+        )
         return b"".join(
             [
                 headers["ros_diagnostics_level"].encode(),
