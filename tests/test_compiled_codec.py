@@ -15,7 +15,7 @@ import subprocess
 import sys
 from array import array
 from collections.abc import Callable
-from itertools import pairwise
+from itertools import chain, pairwise
 from pathlib import Path
 
 import pytest
@@ -25,6 +25,8 @@ from hypothesis import strategies as st
 from overseer.codec import DecodeError, cdr, compiled, ros1
 from overseer.codec.wire import StatusReader, WireFormat, decode_array, decode_laid_out
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits
+from overseer.model.fleet import _intact
 from overseer.sources import ingest
 from support import strategies
 from support.codec_paths import codec_path
@@ -122,6 +124,8 @@ import sys
 sys.modules["overseer.codec._cstatus"] = None
 from overseer.codec import DecodeError, cdr, compiled
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits
+from overseer.model.fleet import _intact
 from overseer.model import FleetModel
 from overseer.sources.ingest import PayloadIngest
 array = DiagnosticArray(1, 2, "f", (DiagnosticStatus(1, "/a", "m", "hw", (("k", "v"),)),))
@@ -189,36 +193,60 @@ def test_a_status_read_anywhere_in_random_bytes_reads_alike(
 
 
 @FUZZ
-@given(st.data(), layout_names)
-def test_the_changed_statuses_scan_alike(data: st.DataObject, name: str) -> None:
+@given(st.data(), layout_names, st.integers(0, 30), st.integers(0, 4))
+def test_the_changed_statuses_scan_alike(
+    data: st.DataObject, name: str, max_length: int, max_values: int
+) -> None:
     wire, encode, _, compiled_name = LAYOUTS[name]
     first = encode(data.draw(arrays))
     laid_out = decode_laid_out(wire, first)
     hashes = array("q", [hash(first[a:b]) for a, b in pairwise(laid_out.bounds)])
     # The next payload: another array (often sharing statuses with the first), or the first damaged.
+    damage = data.draw(st.booleans())
     second = data.draw(
-        st.one_of(
+        damaged(first)
+        if damage
+        else st.one_of(
             st.just(first),
             arrays.map(encode),
             st.lists(st.sampled_from(laid_out.decoded.statuses or (DiagnosticStatus(0, "", "", ""),))).map(
                 lambda items: encode(laid_out.decoded._replace(statuses=tuple(items)))
             ),
-            damaged(first),
         )
     )
     misaligned = wire.alignment - 1
     layout = compiled.LAYOUTS[compiled.READERS[compiled_name]]
+    limits = FleetLimits(max_string_length=max_length, max_values_per_component=max_values)
 
-    def scan(in_c: bool) -> object:
+    def scan(in_c: bool) -> tuple[object, list[int], list[int]]:
         bounds, scanned_hashes = array("I", laid_out.bounds), array("q", hashes)
         args = (second, bounds[0], len(second), bounds, scanned_hashes, misaligned)
         if in_c:
-            found = outcome(lambda: compiled.scan_changed(layout, *args))
+            found = outcome(lambda: compiled.scan_changed(layout, *args, max_length, max_values))
         else:
             found = outcome(lambda: ingest._scan_changed(LAYOUTS[name][2], *args))
         return found, bounds.tolist(), scanned_hashes.tolist()
 
-    assert scan(in_c=True) == scan(in_c=False)
+    (found, *in_c), (expected, *in_python) = scan(in_c=True), scan(in_c=False)
+    assert in_c == in_python
+    if not isinstance(expected, tuple) or expected[0] == "DecodeError":
+        assert found == expected
+        return
+    assert isinstance(found, tuple)
+    changed, pos, fits = found
+    assert (changed, pos) == expected
+    if fits:  # what the model is then spared checking, it would have found so
+        assert _intact(changed, limits)
+    if not damage:  # valid UTF-8: a text's bytes are its encoding
+        assert fits == all(
+            status.level <= 3
+            and len(status.values) <= max_values
+            and all(
+                len(text.encode()) <= max_length
+                for text in (status.name, status.message, status.hardware_id, *chain(*status.values))
+            )
+            for _, status in changed
+        )
 
 
 @pytest.mark.parametrize("name", sorted(LAYOUTS))
@@ -232,10 +260,11 @@ def test_a_status_that_changed_is_found_and_rehashed_as_python_hashes_it(name: s
     bounds = decode_laid_out(wire, first).bounds
     hashes = array("q", [hash(first[a:b]) for a, b in pairwise(bounds)])
     layout = compiled.LAYOUTS[compiled.READERS[compiled_name]]
-    changed, pos = compiled.scan_changed(
-        layout, second, bounds[0], len(second), bounds, hashes, wire.alignment - 1
+    changed, pos, fits = compiled.scan_changed(
+        layout, second, bounds[0], len(second), bounds, hashes, wire.alignment - 1, 3, 1
     )
     assert changed == [(1, items[1]._replace(level=2, message="bad"))]
+    assert fits  # "bad" is three bytes, one key-value
     assert pos == len(second) or name != "ros1"
     assert list(bounds) == list(decode_laid_out(wire, second).bounds)
     assert list(hashes) == [hash(second[a:b]) for a, b in pairwise(bounds)]
@@ -249,12 +278,14 @@ def test_bad_arguments_are_refused_not_read() -> None:
         read(payload, 0, len(payload) + 1)
     with pytest.raises(ValueError, match="outside"):
         read(payload, -1, len(payload))
+    end = len(payload)
     with pytest.raises(TypeError, match="array"):
-        compiled.scan_changed(layout, payload, 20, len(payload), array("i", [20, 40]), array("q", [0]), 3)
+        compiled.scan_changed(layout, payload, 20, end, array("i", [20, 40]), array("q", [0]), 3, 9, 9)
     with pytest.raises(TypeError, match="array"):
-        compiled.scan_changed(layout, payload, 20, len(payload), array("I", [20, 40]), array("d", [0.0]), 3)  # type: ignore[arg-type]
+        wrong = array("d", [0.0])
+        compiled.scan_changed(layout, payload, 20, end, array("I", [20, 40]), wrong, 3, 9, 9)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="one more"):
-        compiled.scan_changed(layout, payload, 20, len(payload), array("I", [20]), array("q", [0]), 3)
+        compiled.scan_changed(layout, payload, 20, end, array("I", [20]), array("q", [0]), 3, 9, 9)
     with pytest.raises(ValueError, match="at least one"):
         compiled.read_statuses(layout, payload, 20, len(payload), array("I"))
     with pytest.raises(ValueError, match="unknown layout"):

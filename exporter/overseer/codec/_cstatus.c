@@ -24,6 +24,10 @@ struct reader {
     const unsigned char *data;
     Py_ssize_t end; /* reading stops here (never past the buffer) */
     enum layout layout;
+    /* The largest of what the statuses read so far hold, for the fleet model's limits. */
+    Py_ssize_t longest_text; /* in bytes, which no text's length in characters exceeds */
+    uint32_t most_values;
+    unsigned char highest_level;
 };
 
 static uint32_t u32_at(const struct reader *r, Py_ssize_t at) {
@@ -39,7 +43,7 @@ static Py_ssize_t aligned(const struct reader *r, Py_ssize_t at) {
 }
 
 /* The string at *at (aligned first); moves *at past it. NULL with DecodeError set when malformed. */
-static PyObject *read_string(const struct reader *r, Py_ssize_t *at) {
+static PyObject *read_string(struct reader *r, Py_ssize_t *at) {
     Py_ssize_t pos = aligned(r, *at);
     if (pos + 4 > r->end) {
         PyErr_SetString(decode_error, "payload ends before a string length");
@@ -60,6 +64,9 @@ static PyObject *read_string(const struct reader *r, Py_ssize_t *at) {
         text_length -= 1;
     }
     *at = pos + (Py_ssize_t)length;
+    if (text_length > r->longest_text) {
+        r->longest_text = text_length;
+    }
     return PyUnicode_DecodeUTF8((const char *)r->data + pos, text_length, "replace");
 }
 
@@ -79,14 +86,18 @@ static PyObject *new_status(PyObject *fields[5]) {
 }
 
 /* The status at *at; moves *at past it. NULL with an exception set when malformed. */
-static PyObject *read_status(const struct reader *r, Py_ssize_t *at) {
+static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
     Py_ssize_t pos = *at;
     if (pos >= r->end) {
         PyErr_SetString(decode_error, "payload ends inside a status");
         return NULL;
     }
     PyObject *fields[5] = {NULL, NULL, NULL, NULL, NULL};
-    fields[0] = PyLong_FromLong((long)r->data[pos]);
+    unsigned char level = r->data[pos];
+    if (level > r->highest_level) {
+        r->highest_level = level;
+    }
+    fields[0] = PyLong_FromLong((long)level);
     if (fields[0] == NULL) {
         return NULL;
     }
@@ -108,6 +119,9 @@ static PyObject *read_status(const struct reader *r, Py_ssize_t *at) {
     if ((Py_ssize_t)count * MIN_KEY_VALUE_BYTES > r->end - pos) {
         PyErr_Format(decode_error, "value count %lu runs past the payload", (unsigned long)count);
         goto fail;
+    }
+    if (count > r->most_values) {
+        r->most_values = count;
     }
     fields[4] = PyTuple_New((Py_ssize_t)count);
     if (fields[4] == NULL) {
@@ -249,7 +263,7 @@ static PyObject *read_status_in(enum layout layout, PyObject *const *args, Py_ss
     }
     PyObject *result = NULL;
     if (check_span(&view, pos, end) == 0) {
-        struct reader r = {(const unsigned char *)view.buf, end, layout};
+        struct reader r = {(const unsigned char *)view.buf, end, layout, 0, 0, 0};
         PyObject *status = read_status(&r, &pos);
         result = status_and_position(status, pos);
     }
@@ -312,7 +326,7 @@ static PyObject *read_statuses(PyObject *module, PyObject *const *args, Py_ssize
     if (statuses == NULL) {
         goto done;
     }
-    struct reader r = {(const unsigned char *)view.buf, end, layout};
+    struct reader r = {(const unsigned char *)view.buf, end, layout, 0, 0, 0};
     uint32_t *bounds = (uint32_t *)bounds_view.buf;
     bounds[0] = (uint32_t)pos;
     for (Py_ssize_t i = 0; i < count; i++) {
@@ -330,16 +344,20 @@ done:
     return statuses;
 }
 
-/* scan_changed(layout, payload, pos, end, bounds, hashes, misaligned) -> ([(index, status)], pos).
+/* scan_changed(layout, payload, pos, end, bounds, hashes, misaligned, max_length, max_values)
+ *     -> ([(index, status)], pos, fits).
  *
  * The ingest's comparison of a payload with the last one, status by status (see PayloadIngest):
  * a status whose bytes hash as before, at an offset that keeps the alignment (shift & misaligned == 0),
- * is skipped; any other is decoded, and its bound and hash updated in place.
+ * is skipped; any other is decoded, and its bound and hash updated in place. `fits` is true when every
+ * status decoded has a level of 0 to 3, no text of more than max_length bytes (so of no more characters)
+ * and no more than max_values key-values: the fleet model's limits cut nothing of them.
  */
 static PyObject *scan_changed(PyObject *module, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 7) {
+    if (nargs != 9) {
         PyErr_Format(PyExc_TypeError,
-                     "expected layout, payload, pos, end, bounds, hashes, misaligned; got %zd arguments",
+                     "expected layout, payload, pos, end, bounds, hashes, misaligned, max_length, max_values;"
+                     " got %zd arguments",
                      nargs);
         return NULL;
     }
@@ -357,6 +375,14 @@ static PyObject *scan_changed(PyObject *module, PyObject *const *args, Py_ssize_
     }
     Py_ssize_t misaligned = PyLong_AsSsize_t(args[6]);
     if (misaligned == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Py_ssize_t max_length = PyLong_AsSsize_t(args[7]);
+    if (max_length == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Py_ssize_t max_values = PyLong_AsSsize_t(args[8]);
+    if (max_values == -1 && PyErr_Occurred()) {
         return NULL;
     }
     Py_buffer view, bounds_view, hashes_view;
@@ -385,7 +411,7 @@ static PyObject *scan_changed(PyObject *module, PyObject *const *args, Py_ssize_
     if (changed == NULL) {
         goto done;
     }
-    struct reader r = {(const unsigned char *)view.buf, end, layout};
+    struct reader r = {(const unsigned char *)view.buf, end, layout, 0, 0, 0};
     uint32_t *bounds = (uint32_t *)bounds_view.buf;
     int64_t *hashes = (int64_t *)hashes_view.buf;
     Py_ssize_t shift = 0; /* how much later than in the last payload the statuses now sit */
@@ -421,7 +447,8 @@ static PyObject *scan_changed(PyObject *module, PyObject *const *args, Py_ssize_
         }
         pos = after;
     }
-    result = Py_BuildValue("(On)", changed, pos);
+    int fits = r.highest_level <= 3 && r.longest_text <= max_length && (Py_ssize_t)r.most_values <= max_values;
+    result = Py_BuildValue("(OnO)", changed, pos, fits ? Py_True : Py_False);
 done:
     Py_XDECREF(changed);
     PyBuffer_Release(&hashes_view);

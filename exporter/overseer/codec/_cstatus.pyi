@@ -23,5 +23,7 @@ def scan_changed(
     bounds: array[int],
     hashes: array[int],
     misaligned: int,
+    max_length: int,
+    max_values: int,
     /,
-) -> tuple[list[tuple[int, DiagnosticStatus]], int]: ...
+) -> tuple[list[tuple[int, DiagnosticStatus]], int, bool]: ...

@@ -82,10 +82,22 @@ def read_statuses(
 
 
 def scan_changed(
-    layout: int, payload: bytes, pos: int, end: int, bounds: array[int], hashes: array[int], misaligned: int
-) -> tuple[list[tuple[int, DiagnosticStatus]], int]:
-    """The statuses that changed since the last payload and where the last one ended, in C.
+    layout: int,
+    payload: bytes,
+    pos: int,
+    end: int,
+    bounds: array[int],
+    hashes: array[int],
+    misaligned: int,
+    max_length: int,
+    max_values: int,
+) -> tuple[list[tuple[int, DiagnosticStatus]], int, bool]:
+    """The statuses that changed since the last payload, where the last one ended, and whether they fit.
 
-    The ingest's status-by-status comparison (`PayloadIngest`); `bounds` and `hashes` change in place.
+    The ingest's status-by-status comparison (`PayloadIngest`), in C; `bounds` and `hashes` change in
+    place. They fit when every one has a level of 0 to 3, no text longer than `max_length` bytes and
+    at most `max_values` key-values: then the fleet model's limits would cut nothing of them.
     """
-    return _cstatus.scan_changed(layout, payload, pos, end, bounds, hashes, misaligned)
+    return _cstatus.scan_changed(
+        layout, payload, pos, end, bounds, hashes, misaligned, max_length, max_values
+    )

@@ -100,17 +100,27 @@ class PayloadIngest:
         # The bounds and hashes are updated in place: a failure below drops the layout.
         compiled_layout = compiled.LAYOUTS.get(layout.read_status)
         if compiled_layout is not None:
-            changed, pos = compiled.scan_changed(
-                compiled_layout, payload, pos, end, bounds, hashes, misaligned
+            limits = self._model.limits
+            changed, pos, fits = compiled.scan_changed(
+                compiled_layout,
+                payload,
+                pos,
+                end,
+                bounds,
+                hashes,
+                misaligned,
+                limits.max_string_length,
+                limits.max_values_per_component,
             )
         else:
             changed, pos = _scan_changed(layout.read_status, payload, pos, end, bounds, hashes, misaligned)
+            fits = False  # the model checks
         if pos > end or (wire.exact_end and pos != end):
             return None
         model = self._model
         if changed:
             revision = model.apply_changes(
-                self._robot, layout.revision, changed, self._transport, self._topic
+                self._robot, layout.revision, changed, self._transport, self._topic, fits_limits=fits
             )
         elif model.touch(self._robot, self._transport, layout.revision):
             revision = layout.revision  # only bytes no status holds changed (CDR padding)
