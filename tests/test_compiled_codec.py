@@ -218,7 +218,7 @@ def test_the_changed_statuses_scan_alike(
     layout = compiled.LAYOUTS[compiled.READERS[compiled_name]]
     limits = FleetLimits(max_string_length=max_length, max_values_per_component=max_values)
 
-    def scan(in_c: bool) -> tuple[object, list[int], list[int]]:
+    def scan(in_c: bool, max_length: int = max_length, max_values: int = max_values) -> tuple[object, ...]:
         bounds, scanned_hashes = array("I", laid_out.bounds), array("q", hashes)
         args = (second, bounds[0], len(second), bounds, scanned_hashes, misaligned)
         if in_c:
@@ -237,16 +237,16 @@ def test_the_changed_statuses_scan_alike(
     assert (changed, pos) == expected
     if fits:  # what the model is then spared checking, it would have found so
         assert _intact(changed, limits)
-    if not damage:  # valid UTF-8: a text's bytes are its encoding
-        assert fits == all(
-            status.level <= 3
-            and len(status.values) <= max_values
-            and all(
-                len(text.encode()) <= max_length
-                for text in (status.name, status.message, status.hardware_id, *chain(*status.values))
-            )
-            for _, status in changed
-        )
+    if changed and not damage:
+        # Valid UTF-8, so a text's bytes are its encoding: the report is exact, at the limits' edges too.
+        texts = [t for _, s in changed for t in (s.name, s.message, s.hardware_id, *chain(*s.values))]
+        longest = max(len(text.encode()) for text in texts)
+        most = max(len(status.values) for _, status in changed)
+        valid = all(status.level <= 3 for _, status in changed)
+        for length, values in ((longest, most), (longest - 1, most), (longest, most - 1)):
+            reported = scan(in_c=True, max_length=length, max_values=values)[0]
+            assert isinstance(reported, tuple)
+            assert reported[2] == (valid and length == longest and values == most)
 
 
 @pytest.mark.parametrize("name", sorted(LAYOUTS))
