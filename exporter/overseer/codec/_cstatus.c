@@ -3,8 +3,9 @@
  * It decodes exactly as the pure-Python readers in cdr.py and ros1.py do, into the same
  * DiagnosticStatus named tuples, with the same DecodeError messages. Every length read from the payload
  * is checked against the bytes that remain before it is used or anything is allocated for it: a hostile
- * payload costs at most its own size and ends in DecodeError. Positions are Py_ssize_t (64 bits here),
- * so no sum of a position and a 32-bit length can overflow.
+ * payload costs at most its own size and ends in DecodeError. A length or count read from the payload is
+ * compared, as an unsigned 64-bit number, with the bytes that remain, so nothing can overflow or turn
+ * negative, whatever the width of Py_ssize_t.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -51,7 +52,7 @@ static PyObject *read_string(struct reader *r, Py_ssize_t *at) {
     }
     uint32_t length = u32_at(r, pos);
     pos += 4;
-    if ((Py_ssize_t)length > r->end - pos) {
+    if ((uint64_t)length > (uint64_t)(r->end - pos)) {
         PyErr_Format(decode_error, "string length %lu runs past the payload", (unsigned long)length);
         return NULL;
     }
@@ -116,7 +117,7 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
     }
     uint32_t count = u32_at(r, pos);
     pos += 4;
-    if ((Py_ssize_t)count * MIN_KEY_VALUE_BYTES > r->end - pos) {
+    if ((uint64_t)count * MIN_KEY_VALUE_BYTES > (uint64_t)(r->end - pos)) {
         PyErr_Format(decode_error, "value count %lu runs past the payload", (unsigned long)count);
         goto fail;
     }
