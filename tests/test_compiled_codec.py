@@ -138,13 +138,13 @@ try:
 except RuntimeError as error:
     refused = "not built" in str(error)
 level = model.snapshot().robots[0].components[("/a", "hw")].level
-print(compiled.AVAILABLE, compiled.implementation(), refused, int(level))
+print(compiled.AVAILABLE, compiled.implementation(), refused, int(level), "not built" in compiled.describe())
 """
     env = {k: v for k, v in os.environ.items() if k != compiled.PURE_PYTHON_VARIABLE}
     result = subprocess.run(
         [sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True
     )
-    assert result.stdout.split() == ["False", "python", "True", "2"]
+    assert result.stdout.split() == ["False", "python", "True", "2", "True"]
 
 
 @pytest.mark.parametrize("pure_python", [False, True], ids=["compiled", "pure-python"])

@@ -35,6 +35,8 @@ class PayloadIngest:
     alignment, decodes as it did, so only the others are decoded and applied. Hashes, not the payload,
     are kept: the payload would cost about 90 bytes a component, a tenth of the memory budget. The
     hashes are Python's keyed 64-bit SipHash (seeded per process), so no robot can aim a collision.
+    With the compiled decoder, the comparison and the decoding of what changed run in C
+    (`compiled.scan_changed`, the same hashes); `_scan_changed` is the pure-Python reference.
     """
 
     def __init__(self, model: FleetModel, robot: str, transport: str, topic: str, wire: WireFormat) -> None:
