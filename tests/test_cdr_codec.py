@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import struct
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -15,9 +16,17 @@ from overseer.codec import DecodeError
 from overseer.codec.cdr import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support import strategies
+from support.codec_paths import CODEC_PATHS, codec_path
 
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 STORES = [Stores.ROS2_JAZZY, Stores.ROS2_HUMBLE]
+
+
+@pytest.fixture(autouse=True, scope="module", params=CODEC_PATHS)
+def codec(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Every test of this module runs once with each status decoder."""
+    with codec_path(request.param):
+        yield request.param
 
 
 def to_rosbags(store: Any, array: DiagnosticArray) -> Any:

@@ -11,6 +11,7 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.registry import CollectorRegistry
 
+from overseer.codec import compiled
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
@@ -78,6 +79,7 @@ def test_exposition_matches_golden_file() -> None:
     model.count_message("dds", "decode_error")
     text = generate_latest(registry).decode()
     text = text.replace('version="' + _version() + '"', 'version="VERSION"')
+    text = text.replace('codec="' + compiled.implementation() + '"', 'codec="CODEC"')
     assert text == GOLDEN.read_text(encoding="utf-8")
 
 

@@ -6,6 +6,7 @@ same package from exactly the files the Dockerfile copies, which is the step tha
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -31,16 +32,15 @@ def test_files_the_dockerfile_copies_exist() -> None:
         assert (ROOT / source).exists(), source
 
 
-def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_docker_engine(
-    tmp_path: Path,
-) -> None:
+def wheel_from_dockerfile_sources(tmp_path: Path, env: dict[str, str] | None = None) -> set[str]:
+    """The names in the wheel built from the files the Dockerfile copies, as .dockerignore leaves them."""
     context = tmp_path / "context"
     context.mkdir()
     for source in dockerfile_copies():
         path = ROOT / source
         if path.is_dir():
             shutil.copytree(
-                path, context / source, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+                path, context / source, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.so")
             )
         else:
             shutil.copy(path, context / source)
@@ -60,6 +60,7 @@ def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_dock
         capture_output=True,
         text=True,
         timeout=300,
+        env=env,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     (wheel,) = (tmp_path / "dist").glob("overseer-*.whl")
@@ -70,3 +71,18 @@ def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_dock
     assert "overseer/py.typed" in names
     assert re.search(r"^overseer = overseer\.cli:main$", entry_points, re.M)
     assert "overseer-0.1.0.data/scripts/check_ros_diagnostics" in names
+    return names
+
+
+def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_docker_engine(
+    tmp_path: Path,
+) -> None:
+    names = wheel_from_dockerfile_sources(tmp_path)
+    assert any(re.fullmatch(r"overseer/codec/_cstatus\..*\.so", name) for name in names)
+
+
+def test_package_builds_without_a_c_compiler_leaving_out_the_compiled_decoder(tmp_path: Path) -> None:
+    # As in the Dockerfile's python:3.11-slim image, which has no gcc.
+    names = wheel_from_dockerfile_sources(tmp_path, {**os.environ, "CC": str(tmp_path / "no-such-gcc")})
+    assert not any("_cstatus" in name and name.endswith(".so") for name in names)
+    assert "overseer/codec/compiled.py" in names

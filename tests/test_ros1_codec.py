@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import struct
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -15,9 +16,18 @@ from overseer.codec import DecodeError
 from overseer.codec.ros1 import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support import strategies
+from support.codec_paths import CODEC_PATHS, codec_path
 from support.ros1 import genpy
 
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+@pytest.fixture(autouse=True, scope="module", params=CODEC_PATHS)
+def codec(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Every test of this module runs once with each status decoder."""
+    with codec_path(request.param):
+        yield request.param
+
 
 # name → (message, header seq)
 EXAMPLES: dict[str, tuple[DiagnosticArray, int]] = {

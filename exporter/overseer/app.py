@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 
 from prometheus_client.registry import Collector, CollectorRegistry
 
+from overseer.codec import compiled
 from overseer.config import Config
 from overseer.history.service import EventHistory
 from overseer.model import FleetModel
@@ -82,6 +83,10 @@ class Exporter:
         threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
+        if compiled.enabled:
+            log.info("%s", compiled.describe())
+        else:
+            log.warning("%s", compiled.describe())
         if self.icinga2_push is not None:
             self.icinga2_push.start()
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 
+from overseer.codec import compiled
 from overseer.codec.errors import DecodeError
 from overseer.codec.wire import ArrayHead, StatusReader, WireFormat, decode_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
@@ -55,7 +56,11 @@ def read_head(payload: bytes) -> ArrayHead:
     pos += 4
     if count * _MIN_STATUS_BYTES > end - pos:
         raise DecodeError(f"status count {count} runs past the payload")
-    return ArrayHead(sec, nanosec, frame_id, count, pos, _READ_STATUS_LE if little else _READ_STATUS_BE)
+    if compiled.enabled:
+        read_status = compiled.READERS["cdr_le" if little else "cdr_be"]
+    else:
+        read_status = _READ_STATUS_LE if little else _READ_STATUS_BE
+    return ArrayHead(sec, nanosec, frame_id, count, pos, read_status)
 
 
 def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[name-defined]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 
+from overseer.codec import compiled
 from overseer.codec.errors import DecodeError
 from overseer.codec.wire import ArrayHead, WireFormat, decode_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
@@ -39,7 +40,9 @@ def read_head(payload: bytes) -> ArrayHead:
     _seq, sec, nanosec = _HEADER.unpack_from(payload)
     frame_id, pos = _read_string(payload, _HEADER.size, end)
     count, pos = _read_count(payload, pos, end, _MIN_STATUS_BYTES, "status")
-    return ArrayHead(sec, nanosec, frame_id, count, pos, read_status)
+    return ArrayHead(
+        sec, nanosec, frame_id, count, pos, compiled.READERS["ros1"] if compiled.enabled else read_status
+    )
 
 
 def read_status(payload: bytes, pos: int, end: int) -> tuple[DiagnosticStatus, int]:

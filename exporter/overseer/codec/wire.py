@@ -10,6 +10,7 @@ from array import array
 from collections.abc import Callable
 from typing import NamedTuple
 
+from overseer.codec import compiled
 from overseer.codec.errors import DecodeError
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 
@@ -56,14 +57,30 @@ def decode_laid_out(wire: WireFormat, payload: bytes) -> LaidOut:
     end = len(payload)
     read_status = head.read_status
     pos = head.statuses_at
-    bounds = array("I", [pos])
+    layout = compiled.LAYOUTS.get(read_status)
+    if layout is not None:
+        # read_head bounded the count by the payload's size, so this allocation is bounded too.
+        bounds = array("I", bytes(4 * (head.status_count + 1)))
+        statuses = compiled.read_statuses(layout, payload, pos, end, bounds)
+        pos = bounds[-1]
+    else:
+        bounds = array("I", [pos])
+        statuses = _read_statuses(read_status, payload, pos, end, head.status_count, bounds)
+        pos = bounds[-1]
+    if wire.exact_end and pos != end:
+        raise DecodeError(f"{end - pos} bytes left over after the message")
+    decoded = DiagnosticArray(head.stamp_sec, head.stamp_nanosec, head.frame_id, statuses)
+    return LaidOut(decoded, bounds, read_status)
+
+
+def _read_statuses(
+    read_status: StatusReader, payload: bytes, pos: int, end: int, count: int, bounds: array[int]
+) -> tuple[DiagnosticStatus, ...]:
+    """`count` statuses from `pos`, appending where each ended to `bounds` (the pure-Python path)."""
     statuses: list[DiagnosticStatus] = []
     append = statuses.append
-    for _ in range(head.status_count):
+    for _ in range(count):
         status, pos = read_status(payload, pos, end)
         append(status)
         bounds.append(pos)
-    if wire.exact_end and pos != end:
-        raise DecodeError(f"{end - pos} bytes left over after the message")
-    decoded = DiagnosticArray(head.stamp_sec, head.stamp_nanosec, head.frame_id, tuple(statuses))
-    return LaidOut(decoded, bounds, read_status)
+    return tuple(statuses)

@@ -190,15 +190,18 @@ class FleetModel:
         changed: list[tuple[int, DiagnosticStatus]],
         transport: str,
         topic: str = "",
+        *,
+        fits_limits: bool = False,
     ) -> int | None:
         """Apply an array equal to the robot's latest but for the statuses `changed` (by position).
 
         Only when the robot is still at `revision`, its latest message lost nothing, and every changed
         status kept its component; returns the new revision, or None (nothing done: apply it in full).
+        `fits_limits`: the caller has checked that no status has a level outside 0-3, a text longer
+        than `max_string_length` or more than `max_values_per_component` key-values.
         """
         now = self._clock()
-        prepared, dropped, truncated = _prepare([status for _, status in changed], self.limits)
-        if dropped or truncated:
+        if not fits_limits and not _intact(changed, self.limits):
             return None
         with self._lock:
             state = self._robots.get(robot)
@@ -207,17 +210,38 @@ class FleetModel:
             latest = state.latest
             if None in latest:
                 return None
-            merged: list[_Prepared] = []
-            for (index, _), entry in zip(changed, prepared, strict=True):
-                if entry is None or index >= len(latest) or latest[index] != entry[0]:
-                    return None
-                merged.append(entry)
+            in_latest = len(latest)
             components = dict(state.components)
             listener = self._level_listener
             changes: list[LevelChange] = []
-            for key, level, message, values, _intact in merged:
+            intern = sys.intern
+            # Written for speed (arrays that changed in every status come through here): the checks and
+            # the merge of `_prepare` and `_merged`, on statuses `_intact` found within every limit.
+            for index, (wire_level, name, message, hardware_id, values) in changed:
+                if index >= in_latest:
+                    return None
+                key = latest[index]
+                if key is None or key[0] != name or key[1] != hardware_id:
+                    return None
                 previous = components[key]
-                current = components[key] = _merged(previous, level, message, values, now, topic)
+                level = _LEVELS[wire_level]
+                same_values = previous.values == values
+                if (
+                    previous.level is level
+                    and previous.message == message
+                    and same_values
+                    and previous.topic == topic
+                ):
+                    continue  # the status says nothing new
+                current = components[key] = Component(
+                    previous.key,
+                    level,
+                    intern(message),
+                    previous.values if same_values else tuple([(intern(k), v) for k, v in values]),
+                    now,
+                    previous.level_changes + (previous.level is not level),
+                    topic,
+                )
                 if listener is not None and current.level is not previous.level:
                     changes.append(LevelChange(previous, current))
             self._robots[robot] = RobotState(
@@ -312,6 +336,25 @@ def _prepare(
                 break
         prepared.append(((name, hardware_id), _LEVELS[wire_level], message, values, intact))
     return prepared, dropped, truncated
+
+
+def _intact(changed: list[tuple[int, DiagnosticStatus]], limits: FleetLimits) -> bool:
+    """Whether every status has a valid level and fits every limit, so that nothing of it would be lost."""
+    max_length = limits.max_string_length
+    max_values = limits.max_values_per_component
+    for _, (wire_level, name, message, hardware_id, values) in changed:
+        if (
+            not 0 <= wire_level <= 3
+            or len(message) > max_length
+            or len(name) > max_length
+            or len(hardware_id) > max_length
+            or len(values) > max_values
+        ):
+            return False
+        for value_key, value_text in values:
+            if len(value_key) > max_length or len(value_text) > max_length:
+                return False
+    return True
 
 
 def _component(

@@ -20,6 +20,7 @@ from prometheus_client.registry import Collector, CollectorRegistry
 from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
+from overseer.codec import compiled
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
@@ -146,7 +147,10 @@ class FleetExposition:
                 f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
             )
         tail.append(headers["overseer_build_info"])
-        tail.append(f'overseer_build_info{{version="{escape_label_value(__version__)}"}} 1.0\n')
+        tail.append(
+            f'overseer_build_info{{codec="{compiled.implementation()}",'
+            f'version="{escape_label_value(__version__)}"}} 1.0\n'
+        )
         tail.append(headers["overseer_web_info"])
         tail.append(self._web_info)
         return b"".join(

@@ -19,6 +19,7 @@ from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamil
 from prometheus_client.registry import Collector
 
 from overseer import __version__
+from overseer.codec import compiled
 from overseer.model import FleetModel, FleetSnapshot, RobotState
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 
@@ -99,7 +100,7 @@ class FleetCollector(Collector):
         families.truncated.add_metric([], float(snapshot.truncated_strings))
         for (transport, reason), count in sorted(snapshot.source_errors.items()):
             families.source_errors.add_metric([transport, reason], float(count))
-        families.build.add_metric([__version__], 1.0)
+        families.build.add_metric([__version__, compiled.implementation()], 1.0)
         if self._external_url is not None:
             families.web_info.add_metric([self._external_url], 1.0)
         yield from families.all()
@@ -249,7 +250,11 @@ class _Families:
                 "Failures to reach robots by transport and reason, such as an unreachable ROS 1 master.",
                 labels=["transport", "reason"],
             ),
-            GaugeMetricFamily("overseer_build_info", "Overseer's version; always 1.", labels=["version"]),
+            GaugeMetricFamily(
+                "overseer_build_info",
+                "Overseer's version and status decoder (compiled, or python without one); always 1.",
+                labels=["version", "codec"],
+            ),
             GaugeMetricFamily(
                 "overseer_web_info",
                 "The URL users reach this exporter at (web.external_url), for links in alerts; always 1.",
