@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -46,9 +47,18 @@ class PageErrors:
         page.on("pageerror", lambda error: self.errors.append(str(error)))
 
 
-def wait_for_refresh(page: Page, timeout_ms: float = 15_000) -> None:
-    """Wait until the page has refreshed itself (auto-refresh) at least once more from now."""
-    count = int(page.evaluate("Number(document.body.dataset.refreshes || 0)"))
-    page.wait_for_function(
-        f"Number(document.body.dataset.refreshes || 0) > {count}", polling=100, timeout=timeout_ms
-    )
+def refreshes(page: Page) -> int:
+    """How many times the page has rendered fresh data from the exporter."""
+    return int(page.evaluate("Number(document.body.dataset.refreshes || 0)"))
+
+
+def wait_for_refresh(page: Page, timeout: float = 15.0) -> None:
+    """Wait until the page has refreshed itself (auto-refresh) at least once more from now.
+
+    Polled from here: the page's Content-Security-Policy forbids the eval that wait_for_function needs.
+    """
+    count = refreshes(page)
+    deadline = time.monotonic() + timeout
+    while refreshes(page) <= count:
+        assert time.monotonic() < deadline, f"the page did not refresh within {timeout}s"
+        page.wait_for_timeout(100)
