@@ -19,7 +19,7 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.serve.api import (
     COMPONENTS_MAX_LIMIT,
     ComponentQuery,
-    QueryError,
+    ComponentQueryError,
     components_document,
     parse_component_query,
 )
@@ -168,7 +168,7 @@ def test_query_parameters_are_parsed_from_names_numbers_and_lists() -> None:
 def test_bad_parameters_are_refused_naming_the_parameter_and_value(
     params: dict[str, list[str]], message: str
 ) -> None:
-    with pytest.raises(QueryError) as raised:
+    with pytest.raises(ComponentQueryError) as raised:
         parse_component_query(params)
     assert str(raised.value) == message
 

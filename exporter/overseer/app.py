@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.config import Config
+from overseer.history.service import EventHistory
 from overseer.model import FleetModel
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
@@ -29,6 +30,7 @@ class Exporter:
     model: FleetModel = field(init=False)
     server: OverseerServer = field(init=False)
     sources: list[Source] = field(default_factory=list)
+    history: EventHistory | None = None
     _stopping: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
@@ -46,13 +48,21 @@ class Exporter:
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern
         registry.register(FleetCollector(self.model, value_keys, transports))
-        exposition = FleetExposition(self.model, value_keys, transports)
+        extra_collectors = []
+        if self.config.events.enabled:
+            self.history = EventHistory(self.config.events, self.model, self.config.log_format == "json")
+            extra_collectors.append(self.history.collector)
+            registry.register(self.history.collector)
+        exposition = FleetExposition(self.model, value_keys, transports, extra_collectors)
         security = load_web_config(self.config.web.config_file)
         address = self.config.web.host_and_port
         self.server = OverseerServer(address, self.model, registry, exposition, security)
+        self.server.events = self.history.store if self.history is not None else None
 
     def start(self) -> None:
         """Start the transports, the expiry timer and the HTTP server threads."""
+        if self.history is not None:
+            self.history.start()  # before the transports, so that it sees their first messages
         for source in self.sources:
             source.start()
         threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
@@ -66,6 +76,8 @@ class Exporter:
         self.server.server_close()
         for source in self.sources:
             source.stop()
+        if self.history is not None:
+            self.history.stop()
 
     def _expire_loop(self) -> None:
         while not self._stopping.wait(EXPIRY_INTERVAL_SECONDS):

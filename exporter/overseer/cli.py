@@ -13,7 +13,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from overseer import __version__
-from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_duration
+from overseer.config import DEFAULT_PORT, ConfigError, load_config, parse_duration, parse_size
+from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
 
@@ -119,6 +120,14 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
     parser.add_argument("--log.level", dest="log_level", choices=["debug", "info", "warning", "error"])
+    parser.add_argument(
+        "--log.format", dest="log_format", choices=["text", "json"], help="log lines as text or JSON"
+    )
+    parser.add_argument(
+        "--events.path", dest="events_path", metavar="PATH", help="event history database (SQLite)"
+    )
+    parser.add_argument("--events.retention", dest="events_retention", metavar="DURATION")
+    parser.add_argument("--events.max-size", dest="events_max_size", metavar="SIZE")
 
 
 def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
@@ -185,11 +194,25 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["shard"] = args.shard
     if args.log_level is not None:
         overrides["log_level"] = args.log_level
+    overrides.update(_event_overrides(args))
     return overrides
 
 
-def _configure_logging(level: str) -> None:
-    logging.basicConfig(level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+def _event_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    overrides: dict[str, Any] = {}
+    if args.log_format is not None:
+        overrides["log_format"] = args.log_format
+    if args.events_path is not None:
+        overrides["events.path"] = args.events_path
+    if args.events_retention is not None:
+        overrides["events.retention"] = parse_duration(args.events_retention, "--events.retention")
+    if args.events_max_size is not None:
+        overrides["events.max_size"] = parse_size(args.events_max_size, "--events.max-size")
+    return overrides
+
+
+def _configure_logging(level: str, log_format: str = "text") -> None:
+    configure_logging(level, log_format)
 
 
 def _wait_for_signal() -> None:
@@ -202,7 +225,7 @@ def _wait_for_signal() -> None:
 
 def _run(args: argparse.Namespace) -> int:
     config = load_config(args.config_file, _exporter_overrides(args))
-    _configure_logging(config.log_level)
+    _configure_logging(config.log_level, config.log_format)
     from overseer.app import Exporter
 
     try:

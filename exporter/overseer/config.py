@@ -100,6 +100,16 @@ class MetricsConfig:
 
 
 @dataclass(frozen=True)
+class EventsConfig:
+    """The event history: an SQLite file of the fleet's transitions, and how much of it to keep."""
+
+    enabled: bool = True
+    path: str = "overseer-events.db"  # relative to the working directory
+    retention: float = 30 * 86400.0  # seconds
+    max_size: int = 1_000_000_000  # bytes
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole configuration."""
 
@@ -110,11 +120,29 @@ class Config:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
     log_level: str = "info"
+    events: EventsConfig = field(default_factory=EventsConfig)
+    log_format: str = "text"
 
 
 _DURATION_PART = re.compile(r"(\d+(?:\.\d+)?)(ms|s|m|h|d)")
 _DURATION_UNITS = {"ms": 0.001, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
 _LOG_LEVELS = ("debug", "info", "warning", "error")
+_LOG_FORMATS = ("text", "json")
+_SIZE = re.compile(r"(\d+(?:\.\d+)?)\s*(B|kB|KB|MB|GB|TB|KiB|MiB|GiB|TiB)?")
+_SIZE_UNITS = {
+    None: 1,
+    "B": 1,
+    "kB": 1000,
+    "KB": 1000,
+    "MB": 1000**2,
+    "GB": 1000**3,
+    "TB": 1000**4,
+    "KiB": 1024,
+    "MiB": 1024**2,
+    "GiB": 1024**3,
+    "TiB": 1024**4,
+}
+MIN_EVENTS_SIZE = 1_000_000
 
 
 def parse_duration(value: object, key: str) -> float:
@@ -130,6 +158,20 @@ def parse_duration(value: object, key: str) -> float:
     if not seconds > 0 or seconds == float("inf"):
         raise ConfigError(f"{key}: must be a positive duration, got {value!r}")
     return seconds
+
+
+def parse_size(value: object, key: str) -> int:
+    """Bytes from a number or a size such as `500MB`, `1GB`, `2GiB`."""
+    match = _SIZE.fullmatch(value.strip()) if isinstance(value, str) else None
+    if isinstance(value, int) and not isinstance(value, bool):
+        size = value
+    elif match is not None:
+        size = int(float(match.group(1)) * _SIZE_UNITS[match.group(2)])
+    else:
+        raise ConfigError(f"{key}: expected a size such as 500MB or 1GB, got {value!r}")
+    if size < MIN_EVENTS_SIZE:
+        raise ConfigError(f"{key}: must be at least 1MB, got {value!r}")
+    return size
 
 
 def parse_listen_address(value: str) -> tuple[str, int]:
@@ -174,7 +216,9 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
 
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
-    _reject_unknown(raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level"})
+    _reject_unknown(
+        raw, "", {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "events", "log_format"}
+    )
     web = _section(raw, "web", {"listen_address", "config_file"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
@@ -206,7 +250,25 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
                 f"log_level: expected one of {', '.join(_LOG_LEVELS)}, got {raw['log_level']!r}"
             )
         config = replace(config, log_level=level)
-    return config
+    if "log_format" in raw:
+        log_format = _string(raw["log_format"], "log_format").lower()
+        if log_format not in _LOG_FORMATS:
+            raise ConfigError(f"log_format: expected text or json, got {raw['log_format']!r}")
+        config = replace(config, log_format=log_format)
+    events = _section(raw, "events", {f.name for f in fields(EventsConfig)})
+    return replace(config, events=_events_config(events))
+
+
+def _events_config(raw: dict[str, Any]) -> EventsConfig:
+    defaults = EventsConfig()
+    return EventsConfig(
+        enabled=_bool(raw.get("enabled", defaults.enabled), "events.enabled"),
+        path=_string(raw["path"], "events.path") if "path" in raw else defaults.path,
+        retention=parse_duration(raw["retention"], "events.retention")
+        if "retention" in raw
+        else defaults.retention,
+        max_size=parse_size(raw["max_size"], "events.max_size") if "max_size" in raw else defaults.max_size,
+    )
 
 
 def _dds_config(raw: dict[str, Any]) -> DdsConfig:

@@ -4,8 +4,18 @@
 behind its lock, `shard` which robots this exporter follows.
 """
 
-from overseer.model.fleet import Applied, FleetModel
+from overseer.model.fleet import Applied, FleetModel, LevelChange, LevelListener
 from overseer.model.snapshot import FleetSnapshot
 from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
 
-__all__ = ["Applied", "Component", "ComponentKey", "FleetLimits", "FleetModel", "FleetSnapshot", "RobotState"]
+__all__ = [
+    "Applied",
+    "Component",
+    "ComponentKey",
+    "FleetLimits",
+    "FleetModel",
+    "FleetSnapshot",
+    "LevelChange",
+    "LevelListener",
+    "RobotState",
+]

@@ -30,6 +30,17 @@ class Applied(NamedTuple):
     revision: int | None  # None when the robot was refused (the robot cap)
 
 
+class LevelChange(NamedTuple):
+    """A component whose reported level changed in one message (`previous` None: first reported)."""
+
+    previous: Component | None
+    current: Component
+
+
+# Called after the lock is released with the robot, the message's time and what changed in it.
+LevelListener = Callable[[str, float, list[LevelChange]], None]
+
+
 class FleetModel:
     """The fleet's live state behind one lock; safe to feed from many transport threads."""
 
@@ -43,6 +54,11 @@ class FleetModel:
         self._dropped_statuses: Counter[str] = Counter()
         self._truncated_strings = 0
         self._source_errors: Counter[tuple[str, str]] = Counter()
+        self._level_listener: LevelListener | None = None
+
+    def set_level_listener(self, listener: LevelListener | None) -> None:
+        """Have `listener` told of every reported level change and every new component, as applied."""
+        self._level_listener = listener
 
     def count_source_error(self, transport: str, reason: str) -> None:
         """Count one failure of a transport to reach a robot (an unreachable master, a lost connection)."""
@@ -101,6 +117,8 @@ class FleetModel:
         now = self._clock()
         limits = self.limits
         prepared, dropped, truncated = _prepare(array.statuses, limits)
+        listener = self._level_listener
+        changes: list[LevelChange] | None = [] if listener is not None else None
         with self._lock:
             state = self._robots.get(robot)
             if state is None:
@@ -128,8 +146,12 @@ class FleetModel:
                         continue
                     previous = _component(_interned(key), level, message, values, now, 0, topic)
                     components[previous.key] = previous
+                    if changes is not None:
+                        changes.append(LevelChange(None, previous))
                 else:
-                    components[key] = _merged(previous, level, message, values, now, topic)
+                    merged = components[key] = _merged(previous, level, message, values, now, topic)
+                    if changes is not None and merged.level is not previous.level:
+                        changes.append(LevelChange(previous, merged))
                 key = previous.key  # the fleet's shared copy, not this message's
                 latest.append(key if intact and key not in in_message else None)
                 in_message.add(key)
@@ -157,6 +179,8 @@ class FleetModel:
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
             self._message_counts[(transport, "dropped" if dropped else "received")] += 1
+        if changes and listener is not None:
+            listener(robot, now, changes)
         return Applied(not dropped, revision + 1)
 
     def apply_changes(
@@ -189,8 +213,13 @@ class FleetModel:
                     return None
                 merged.append(entry)
             components = dict(state.components)
+            listener = self._level_listener
+            changes: list[LevelChange] = []
             for key, level, message, values, _intact in merged:
-                components[key] = _merged(components[key], level, message, values, now, topic)
+                previous = components[key]
+                current = components[key] = _merged(previous, level, message, values, now, topic)
+                if listener is not None and current.level is not previous.level:
+                    changes.append(LevelChange(previous, current))
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -202,6 +231,8 @@ class FleetModel:
                 state.missing,
             )
             self._message_counts[(transport, "received")] += 1
+        if changes and listener is not None:
+            listener(robot, now, changes)
         return revision + 1
 
     def forget_topic(self, robot: str, topic: str) -> None:

@@ -70,7 +70,7 @@ QUERY_MAX_LENGTH = 256
 _LEVEL_NAMES = ", ".join(level.name for level in Level)
 
 
-class QueryError(ValueError):
+class ComponentQueryError(ValueError):
     """A query parameter the API cannot honour; the message names the parameter and its value."""
 
 
@@ -94,16 +94,16 @@ def parse_component_query(params: Mapping[str, Sequence[str]]) -> ComponentQuery
                 continue
             level = _level_named(word)
             if level is None:
-                raise QueryError(f"level: expected {_LEVEL_NAMES} or 0-3, got {word!r}")
+                raise ComponentQueryError(f"level: expected {_LEVEL_NAMES} or 0-3, got {word!r}")
             levels = (levels or set()) | {level}
     text = _last(params, "q") or ""
     if len(text) > QUERY_MAX_LENGTH:
-        raise QueryError(f"q: longer than {QUERY_MAX_LENGTH} characters ({len(text)})")
+        raise ComponentQueryError(f"q: longer than {QUERY_MAX_LENGTH} characters ({len(text)})")
     limit_text = _last(params, "limit")
     limit = COMPONENTS_DEFAULT_LIMIT
     if limit_text is not None:
         if not limit_text.isdigit() or not 1 <= int(limit_text) <= COMPONENTS_MAX_LIMIT:
-            raise QueryError(
+            raise ComponentQueryError(
                 f"limit: expected a whole number from 1 to {COMPONENTS_MAX_LIMIT}, got {limit_text!r}"
             )
         limit = int(limit_text)

@@ -15,6 +15,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import cast
 
+from prometheus_client.exposition import generate_latest
+from prometheus_client.registry import Collector, CollectorRegistry
 from prometheus_client.utils import floatToGoString
 
 from overseer import __version__
@@ -58,8 +60,21 @@ class _RobotLines:
 class FleetExposition:
     """Renders the fleet model as the metric contract in the Prometheus text format."""
 
-    def __init__(self, model: FleetModel, value_keys: re.Pattern[str], transports: Iterable[str]) -> None:
-        """Render `model`, exporting key-values whose key fully matches `value_keys`."""
+    def __init__(
+        self,
+        model: FleetModel,
+        value_keys: re.Pattern[str],
+        transports: Iterable[str],
+        extra_collectors: Iterable[Collector] = (),
+    ) -> None:
+        """Render `model`, exporting key-values whose key fully matches `value_keys`.
+
+        `extra_collectors` (small ones, such as the event history's) are rendered by prometheus-client
+        after the fleet, as a registry holding the fleet's collector and then them renders them.
+        """
+        self._extra = CollectorRegistry(auto_describe=False)
+        for collector in extra_collectors:
+            self._extra.register(collector)
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
@@ -73,7 +88,7 @@ class FleetExposition:
     def render(self) -> bytes:
         """The exposition of the fleet now."""
         with self._lock:
-            return self._render(self._model.snapshot())
+            return self._render(self._model.snapshot()) + generate_latest(self._extra)
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
         render = _RenderCache(NumericValues(self._value_keys))

@@ -27,9 +27,11 @@ from urllib.parse import parse_qs, unquote, urlsplit
 from prometheus_client.exposition import choose_encoder
 from prometheus_client.registry import CollectorRegistry
 
+from overseer.history.query import QueryError, parse_event_query
+from overseer.history.store import EventStore, EventsUnavailable
 from overseer.model import FleetModel
 from overseer.serve.api import (
-    QueryError,
+    ComponentQueryError,
     components_document,
     parse_component_query,
     robot_document,
@@ -47,6 +49,7 @@ log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
 COMPONENTS_PATH = "/api/v1/components"
+EVENTS_PATH = "/api/v1/events"
 MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
 REQUEST_TIMEOUT_SECONDS = 10.0
@@ -61,6 +64,7 @@ class OverseerServer(ThreadingHTTPServer):
     """A threading HTTP server that serves one fleet model and one registry."""
 
     daemon_threads = True
+    events: EventStore | None = None  # the event history, when enabled
     block_on_close = False  # stopping never waits for a slow client
     request_queue_size = 64
 
@@ -266,6 +270,8 @@ class _Handler(BaseHTTPRequestHandler):
             self._send(
                 200, page_file.body, page_file.content_type, head_only, compressible=True, extra=PAGE_HEADERS
             )
+        elif path == EVENTS_PATH:
+            self._events(urlsplit(self.path).query, head_only)
         elif path in ("/", "/index.html"):
             self._send(
                 200, self.server.status_page, "text/html; charset=utf-8", head_only, extra=PAGE_HEADERS
@@ -284,10 +290,24 @@ class _Handler(BaseHTTPRequestHandler):
     def _components(self, head_only: bool) -> None:
         try:
             query = parse_component_query(parse_qs(urlsplit(self.path).query))
-        except QueryError as error:
+        except ComponentQueryError as error:
             self._json(400, {"error": str(error)}, head_only)
             return
         self._json(200, components_document(self.server.model.snapshot(), query), head_only)
+
+    def _events(self, query_string: str, head_only: bool) -> None:
+        store = self.server.events
+        if store is None:
+            self._json(404, {"error": "the event history is disabled (events.enabled: false)"}, head_only)
+            return
+        try:
+            events, cursor = store.query(parse_event_query(query_string))
+        except QueryError as error:
+            self._json(400, {"error": str(error)}, head_only)
+        except EventsUnavailable as error:
+            self._json(503, {"error": f"the event history is unavailable: {error}"}, head_only)
+        else:
+            self._json(200, {"events": events, "next": cursor}, head_only)
 
     def _metrics(self, head_only: bool) -> None:
         accept = self.headers.get("Accept", "")

@@ -1,0 +1,48 @@
+"""One transition of the fleet, as it is stored, logged and served by /api/v1/events."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from overseer.levels import Level
+
+EventKind = Literal["level", "robot_down", "robot_up", "appeared", "missing", "expired"]
+EVENT_KINDS: tuple[EventKind, ...] = ("level", "robot_down", "robot_up", "appeared", "missing", "expired")
+_LEVEL_NAMES = {level: level.name for level in Level}
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """A transition: a component's level, a robot going down or up, a component appearing, going, expiring.
+
+    `component` and `hardware_id` are None for events of a whole robot; `old_level` is None when nothing
+    was known before (a first report), `new_level` None when nothing is known after (missing, expired).
+    """
+
+    time: float
+    robot: str
+    kind: EventKind
+    component: str | None = None
+    hardware_id: str | None = None
+    old_level: Level | None = None
+    new_level: Level | None = None
+    message: str = ""
+    values: tuple[tuple[str, str], ...] = ()
+
+    def document(self, event_id: int) -> dict[str, Any]:
+        """The event as the JSON API and the JSON log show it, under `event_id`."""
+        return {
+            "id": event_id,
+            "time": self.time,
+            "robot": self.robot,
+            "component": self.component,
+            "hardware_id": self.hardware_id,
+            "kind": self.kind,
+            "old_level": None if self.old_level is None else int(self.old_level),
+            "new_level": None if self.new_level is None else int(self.new_level),
+            "old_state": None if self.old_level is None else _LEVEL_NAMES[self.old_level],
+            "new_state": None if self.new_level is None else _LEVEL_NAMES[self.new_level],
+            "message": self.message,
+            "values": [{"key": key, "value": value} for key, value in self.values],
+        }

@@ -1,0 +1,390 @@
+"""The event history on disk: an SQLite database in WAL mode, written in batches by a thread of its own.
+
+Producers (`add`) only append to an in-memory queue under a lock; the writer thread takes everything
+queued every `FLUSH_INTERVAL_SECONDS` and inserts it in one transaction, so a busy fleet costs one
+commit a flush, not one a transition. A full queue drops events and counts them. Events older than the
+retention are deleted every `PRUNE_INTERVAL_SECONDS`, and the oldest go whenever the database outgrows
+its size cap (the file shrinks too: the database uses incremental auto-vacuum).
+
+A database that cannot be opened (a directory that does not exist or is not writable, a file that is
+not an Overseer event database or is corrupt) is not fatal: the store says why in one log line, reports
+itself down in `overseer_events_store_up`, and counts every event it cannot keep. The exporter goes on
+serving metrics. A write that fails later (a full disk) drops that batch, counted, and the next is tried.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import sqlite3
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from overseer.history.events import Event
+from overseer.history.query import EventQuery, encode_cursor
+from overseer.levels import Level
+
+log = logging.getLogger(__name__)
+event_log = logging.getLogger("overseer.events")
+
+FLUSH_INTERVAL_SECONDS = 0.25
+PRUNE_INTERVAL_SECONDS = 60.0
+DEFAULT_QUEUE_LIMIT = 200_000
+DROP_REASONS = ("queue_full", "write_error", "store_unavailable")
+APPLICATION_ID = 0x4F565352  # "OVSR": marks the file as an Overseer event database
+SIZE_CAP_TARGET = 0.9  # pruning for size leaves the database at this share of the cap
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS events (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    time REAL NOT NULL,
+    robot TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    component TEXT,
+    hardware_id TEXT,
+    old_level INTEGER,
+    new_level INTEGER,
+    message TEXT NOT NULL,
+    key_values TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS events_by_time ON events (time, id);
+CREATE INDEX IF NOT EXISTS events_by_robot ON events (robot, time, id);
+"""
+_COLUMNS = "id, time, robot, kind, component, hardware_id, old_level, new_level, message, key_values"
+_INSERT = (
+    "INSERT INTO events (time, robot, kind, component, hardware_id, old_level, new_level, message,"
+    " key_values) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)"
+)
+_LEVELS = tuple(Level)
+_NO_VALUES = "[]"
+
+
+class EventsUnavailable(RuntimeError):
+    """The event database could not be opened; the message says why."""
+
+
+@dataclass(frozen=True)
+class StoreSettings:
+    """Where the database is and how much of it to keep."""
+
+    path: str
+    retention: float  # seconds
+    max_size: int  # bytes
+    log_events: bool = False  # also log each event (for JSON logs)
+    queue_limit: int = DEFAULT_QUEUE_LIMIT
+
+
+@dataclass(frozen=True)
+class StoreStats:
+    """What the store did: events written, dropped by reason, the database's size, whether it writes."""
+
+    written: int
+    dropped: dict[str, int]
+    size_bytes: int
+    up: bool
+
+
+class EventStore:
+    """The event database: `add` from any thread, `query` from any thread, one writer thread."""
+
+    def __init__(self, settings: StoreSettings, clock: Callable[[], float] = time.time) -> None:
+        """Open (or create) the database at `settings.path`; on failure the store runs degraded."""
+        self.settings = settings
+        self._clock = clock
+        self._queue: list[list[Event]] = []
+        self._queued = 0
+        self._queue_lock = threading.Lock()
+        self._write_lock = threading.Lock()
+        self._read_lock = threading.Lock()
+        self._written = 0
+        self._dropped: Counter[str] = Counter()
+        self._writing_ok = True
+        self._last_prune = -math.inf
+        self._last_write_error = -math.inf
+        self._stopping = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._writer: sqlite3.Connection | None = None
+        self._reader: sqlite3.Connection | None = None
+        self.problem: str | None = None
+        try:
+            self._writer = _open_database(settings.path)
+            self._reader = _connect(settings.path)
+        except (sqlite3.Error, OSError) as error:
+            self.problem = _describe_open_error(settings.path, error)
+            if self._writer is not None:
+                self._writer.close()
+                self._writer = None
+            log.error("%s; events are not being written (the exporter goes on serving metrics)", self.problem)
+
+    @property
+    def available(self) -> bool:
+        """True when the database is open."""
+        return self._writer is not None
+
+    def add(self, events: list[Event]) -> None:
+        """Queue events for the writer; drops (and counts) what does not fit in the queue."""
+        if not events:
+            return
+        if self._writer is None:
+            with self._queue_lock:
+                self._dropped["store_unavailable"] += len(events)
+            return
+        with self._queue_lock:
+            room = self.settings.queue_limit - self._queued
+            if room < len(events):
+                self._dropped["queue_full"] += len(events) - max(room, 0)
+                events = events[: max(room, 0)]
+                if not events:
+                    return
+            self._queue.append(events)
+            self._queued += len(events)
+
+    def start(self) -> None:
+        """Start the writer thread (nothing to do when the database could not be opened)."""
+        if self._writer is None or self._thread is not None:
+            return
+        self.prune()
+        self._thread = threading.Thread(target=self._run, name="event-writer", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Write what is queued, stop the writer and close the database."""
+        self._stopping.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        self.flush()
+        with self._write_lock:
+            if self._writer is not None:
+                self._writer.close()
+                self._writer = None
+        with self._read_lock:
+            if self._reader is not None:
+                self._reader.close()
+                self._reader = None
+
+    def flush(self) -> int:
+        """Write everything queued now, in the calling thread; returns how many events were written."""
+        with self._queue_lock:
+            batches, self._queue, self._queued = self._queue, [], 0
+        events = [event for batch in batches for event in batch]
+        if not events:
+            return 0
+        with self._write_lock:
+            return self._write(events)
+
+    def prune(self) -> int:
+        """Delete events older than the retention, and the oldest beyond the size cap; returns how many."""
+        with self._write_lock:
+            writer = self._writer
+            if writer is None:
+                return 0
+            self._last_prune = time.monotonic()
+            try:
+                horizon = self._clock() - self.settings.retention
+                deleted = writer.execute("DELETE FROM events WHERE time < ?", (horizon,)).rowcount
+                deleted += self._prune_to_size(writer)
+                if deleted:
+                    writer.execute("PRAGMA incremental_vacuum")
+                return deleted
+            except sqlite3.Error as error:
+                log.error("cannot prune the event database %r: %s", self.settings.path, error)
+                return 0
+
+    def query(self, query: EventQuery) -> tuple[list[dict[str, Any]], str | None]:
+        """The events matching `query`, newest first, and the cursor of the next page (or None)."""
+        clauses: list[str] = []
+        parameters: list[Any] = []
+        if query.robot is not None:
+            clauses.append("robot = ?")
+            parameters.append(query.robot)
+        if query.component is not None:
+            clauses.append("instr(component, ?) > 0")
+            parameters.append(query.component)
+        if query.levels:
+            clauses.append(f"new_level IN ({', '.join('?' * len(query.levels))})")
+            parameters.extend(int(level) for level in query.levels)
+        if query.since is not None:
+            clauses.append("time >= ?")
+            parameters.append(query.since)
+        if query.until is not None:
+            clauses.append("time <= ?")
+            parameters.append(query.until)
+        if query.before is not None:
+            clauses.append("(time < ? OR (time = ? AND id < ?))")
+            parameters.extend([query.before[0], query.before[0], query.before[1]])
+        where = f" WHERE {' AND '.join(clauses)}" if clauses else ""
+        sql = f"SELECT {_COLUMNS} FROM events{where} ORDER BY time DESC, id DESC LIMIT ?"
+        parameters.append(query.limit + 1)
+        with self._read_lock:
+            if self._reader is None:
+                raise EventsUnavailable(self.problem or "the event database is closed")
+            rows = self._reader.execute(sql, parameters).fetchall()
+        documents = [_document(row) for row in rows[: query.limit]]
+        more = len(rows) > query.limit
+        cursor = encode_cursor(documents[-1]["time"], documents[-1]["id"]) if more else None
+        return documents, cursor
+
+    def stats(self) -> StoreStats:
+        """Counts and the database's size now (the main file and its write-ahead log)."""
+        size = 0
+        for suffix in ("", "-wal"):
+            with contextlib.suppress(OSError):  # not there (yet)
+                size += os.stat(self.settings.path + suffix).st_size
+        with self._queue_lock:
+            dropped = {reason: self._dropped.get(reason, 0) for reason in DROP_REASONS}
+            written = self._written
+        return StoreStats(written, dropped, size, self._writer is not None and self._writing_ok)
+
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            self._wake.wait(FLUSH_INTERVAL_SECONDS)
+            self.flush()
+            if time.monotonic() - self._last_prune >= PRUNE_INTERVAL_SECONDS:
+                self.prune()
+
+    def _write(self, events: list[Event]) -> int:
+        writer = self._writer
+        if writer is None:
+            with self._queue_lock:
+                self._dropped["store_unavailable"] += len(events)
+            return 0
+        rows = [
+            (
+                event.time,
+                event.robot,
+                event.kind,
+                event.component,
+                event.hardware_id,
+                None if event.old_level is None else int(event.old_level),
+                None if event.new_level is None else int(event.new_level),
+                event.message,
+                json.dumps(event.values, ensure_ascii=False) if event.values else _NO_VALUES,
+            )
+            for event in events
+        ]
+        try:
+            writer.execute("BEGIN")
+            first = _sequence(writer) if self.settings.log_events else 0
+            writer.executemany(_INSERT, rows)
+            writer.execute("COMMIT")
+        except sqlite3.Error as error:
+            if writer.in_transaction:
+                writer.execute("ROLLBACK")
+            with self._queue_lock:
+                self._dropped["write_error"] += len(events)
+            self._writing_ok = False
+            if time.monotonic() - self._last_write_error > 60:  # one line a minute while it lasts
+                log.error(
+                    "cannot write to the event database %r: %s; %d events dropped (counted in "
+                    "overseer_events_dropped_total)",
+                    self.settings.path,
+                    error,
+                    len(events),
+                )
+            self._last_write_error = time.monotonic()
+            return 0
+        self._writing_ok = True
+        with self._queue_lock:
+            self._written += len(events)
+        if self.settings.log_events:
+            for offset, event in enumerate(events, start=1):
+                event_log.info("event", extra={"event": event.document(first + offset)})
+        if self._used_bytes(writer) > self.settings.max_size:
+            deleted = self._prune_to_size(writer)
+            if deleted:
+                writer.execute("PRAGMA incremental_vacuum")
+        return len(events)
+
+    def _used_bytes(self, writer: sqlite3.Connection) -> int:
+        pages = writer.execute("PRAGMA page_count").fetchone()[0]
+        free = writer.execute("PRAGMA freelist_count").fetchone()[0]
+        page_size = writer.execute("PRAGMA page_size").fetchone()[0]
+        return int((pages - free) * page_size)
+
+    def _prune_to_size(self, writer: sqlite3.Connection) -> int:
+        """Delete the oldest events until the database is within `SIZE_CAP_TARGET` of its cap."""
+        used = self._used_bytes(writer)
+        if used <= self.settings.max_size:
+            return 0
+        count = writer.execute("SELECT count(*) FROM events").fetchone()[0]
+        share = 1.0 - SIZE_CAP_TARGET * self.settings.max_size / used
+        doomed = min(count, max(1, math.ceil(count * share)))
+        deleted: int = writer.execute(
+            "DELETE FROM events WHERE id IN (SELECT id FROM events ORDER BY time, id LIMIT ?)", (doomed,)
+        ).rowcount
+        log.info("event database over its size cap: deleted the %d oldest events", deleted)
+        return deleted
+
+
+def _sequence(writer: sqlite3.Connection) -> int:
+    """The last id AUTOINCREMENT gave out (ids of deleted events are never reused)."""
+    row = writer.execute("SELECT seq FROM sqlite_sequence WHERE name = 'events'").fetchone()
+    return int(row[0]) if row else 0
+
+
+def _connect(path: str) -> sqlite3.Connection:
+    connection = sqlite3.connect(path, timeout=5.0, isolation_level=None, check_same_thread=False)
+    connection.execute("PRAGMA busy_timeout = 5000")
+    return connection
+
+
+def _open_database(path: str) -> sqlite3.Connection:
+    """The writer's connection to a new or existing Overseer event database, in WAL mode."""
+    directory = Path(path).parent
+    if not directory.is_dir():
+        raise OSError(f"directory {str(directory)!r} does not exist")
+    connection = _connect(path)
+    try:
+        tables = {row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        application_id = connection.execute("PRAGMA application_id").fetchone()[0]
+        if tables and application_id != APPLICATION_ID:
+            raise sqlite3.DatabaseError("it is an SQLite database, but not an Overseer event database")
+        if not tables:
+            connection.execute("PRAGMA auto_vacuum = INCREMENTAL")  # only takes effect before a table exists
+            connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+        if str(mode).lower() != "wal":
+            raise sqlite3.OperationalError(f"cannot switch to WAL mode (journal mode is {mode})")
+        connection.execute("PRAGMA synchronous = NORMAL")
+        connection.execute("PRAGMA journal_size_limit = 16777216")
+        connection.executescript(_SCHEMA)
+    except BaseException:
+        connection.close()
+        raise
+    return connection
+
+
+def _describe_open_error(path: str, error: BaseException) -> str:
+    if isinstance(error, sqlite3.DatabaseError) and not isinstance(error, sqlite3.OperationalError):
+        return (
+            f"cannot use the event database {path!r}: {error} "
+            "(move it away or delete it to start a new history)"
+        )
+    reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
+    return f"cannot open the event database {path!r}: {reason} (is its directory there and writable?)"
+
+
+def _document(row: tuple[Any, ...]) -> dict[str, Any]:
+    event_id, at, robot, kind, component, hardware_id, old_level, new_level, message, values = row
+    event = Event(
+        at,
+        robot,
+        kind,
+        component,
+        hardware_id,
+        None if old_level is None else _LEVELS[old_level],
+        None if new_level is None else _LEVELS[new_level],
+        message,
+        tuple((key, value) for key, value in json.loads(values)),
+    )
+    return event.document(event_id)

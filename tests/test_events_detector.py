@@ -1,0 +1,269 @@
+"""Transition detection: every kind of event, with exact times and messages, from a real fleet model."""
+
+from __future__ import annotations
+
+from overseer.history.detector import TransitionDetector
+from overseer.history.events import Event
+from overseer.levels import Level
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+
+STALE_AFTER, ROBOT_TIMEOUT, EXPIRE_AFTER = 5.0, 10.0, 60.0
+
+
+class Clock:
+    """A hand-moved clock."""
+
+    def __init__(self) -> None:
+        """Start at a fixed unix time."""
+        self.now = 1_700_000_000.0
+
+    def __call__(self) -> float:
+        """The current time."""
+        return self.now
+
+
+class Fleet:
+    """A fleet model with a detector attached, collecting what it sends."""
+
+    def __init__(self) -> None:
+        """An empty fleet at a fixed time."""
+        self.clock = Clock()
+        limits = FleetLimits(stale_after=STALE_AFTER, robot_timeout=ROBOT_TIMEOUT, expire_after=EXPIRE_AFTER)
+        self.model = FleetModel(limits, clock=self.clock)
+        self.events: list[Event] = []
+        self.detector = TransitionDetector(limits, self.events.extend)
+        self.model.set_level_listener(self.detector.on_level_changes)
+
+    def publish(self, robot: str, *statuses: tuple[int, str, str]) -> None:
+        """Apply one array of (level, name, message) statuses, each with a voltage key-value."""
+        array = DiagnosticArray(
+            0, 0, "", tuple(DiagnosticStatus(lv, n, m, "hw", (("voltage", "11.2"),)) for lv, n, m in statuses)
+        )
+        self.model.apply(robot, array, "dds")
+
+    def advance(self, seconds: float) -> None:
+        """Move the clock on."""
+        self.clock.now += seconds
+
+    def check(self) -> None:
+        """Run the periodic snapshot comparison."""
+        self.detector.check(self.model.snapshot())
+
+    def take(self) -> list[Event]:
+        """The events sent since the last call."""
+        events, self.events[:] = list(self.events), []
+        return events
+
+
+def kinds(events: list[Event]) -> list[tuple[str, str | None]]:
+    return [(event.kind, event.component) for event in events]
+
+
+def started_fleet() -> Fleet:
+    fleet = Fleet()
+    fleet.publish("robot1", (0, "/a", "ok"), (0, "/b", "ok"))
+    fleet.check()
+    fleet.take()
+    return fleet
+
+
+def test_a_first_message_makes_its_components_appear_and_its_robot_up() -> None:
+    fleet = Fleet()
+    start = fleet.clock.now
+    fleet.publish("robot1", (0, "/a", "fine"), (2, "/b", "broken"))
+    fleet.check()
+    events = fleet.take()
+    assert kinds(events) == [("appeared", "/a"), ("appeared", "/b"), ("robot_up", None)]
+    appeared = events[1]
+    assert appeared == Event(
+        start, "robot1", "appeared", "/b", "hw", None, Level.ERROR, "broken", (("voltage", "11.2"),)
+    )
+    assert events[2] == Event(
+        start,
+        "robot1",
+        "robot_up",
+        old_level=None,
+        new_level=Level.ERROR,
+        message="first diagnostics received",
+    )
+
+
+def test_a_level_change_is_one_event_with_its_message_values_and_exact_time() -> None:
+    fleet = started_fleet()
+    fleet.advance(0.37)
+    fleet.publish("robot1", (2, "/a", "motor stalled"), (0, "/b", "ok"))
+    at = fleet.clock.now
+    fleet.check()
+    assert fleet.take() == [
+        Event(
+            at, "robot1", "level", "/a", "hw", Level.OK, Level.ERROR, "motor stalled", (("voltage", "11.2"),)
+        )
+    ]
+
+
+def test_flapping_within_a_second_records_every_change_between_two_checks() -> None:
+    fleet = started_fleet()
+    for level, message in [(2, "spike"), (0, "ok"), (1, "warm"), (0, "ok")]:
+        fleet.advance(0.1)
+        fleet.publish("robot1", (level, "/a", message), (0, "/b", "ok"))
+    fleet.check()
+    events = fleet.take()
+    assert [(e.old_level, e.new_level, e.message) for e in events] == [
+        (Level.OK, Level.ERROR, "spike"),
+        (Level.ERROR, Level.OK, "ok"),
+        (Level.OK, Level.WARN, "warm"),
+        (Level.WARN, Level.OK, "ok"),
+    ]
+    assert [e.time for e in events] == sorted(e.time for e in events) and len({e.time for e in events}) == 4
+
+
+def test_a_new_message_or_value_at_the_same_level_is_no_event() -> None:
+    fleet = started_fleet()
+    fleet.advance(1)
+    fleet.publish("robot1", (0, "/a", "still ok, other words"), (0, "/b", "ok"))
+    fleet.check()
+    assert fleet.take() == []
+
+
+def test_a_partial_apply_reports_its_level_changes_too() -> None:
+    fleet = Fleet()
+    statuses = (DiagnosticStatus(0, "/a", "ok", "", ()), DiagnosticStatus(0, "/b", "ok", "", ()))
+    applied = fleet.model.apply_array("robot1", DiagnosticArray(0, 0, "", statuses), "dds")
+    assert applied.revision is not None
+    fleet.take()
+    fleet.advance(0.5)
+    revision = fleet.model.apply_changes(
+        "robot1", applied.revision, [(1, DiagnosticStatus(1, "/b", "hot", "", ()))], "dds"
+    )
+    assert revision == applied.revision + 1
+    assert fleet.take() == [Event(fleet.clock.now, "robot1", "level", "/b", "", Level.OK, Level.WARN, "hot")]
+
+
+def test_republishing_the_same_array_is_no_event_over_many_checks() -> None:
+    fleet = started_fleet()
+    for _ in range(20):
+        fleet.advance(1)
+        assert fleet.model.touch("robot1", "dds")
+        fleet.check()
+    assert fleet.take() == []
+
+
+def test_a_silent_robot_goes_down_once_at_its_timeout_and_comes_back_up() -> None:
+    fleet = started_fleet()
+    fleet.publish("robot1", (1, "/a", "warm"), (0, "/b", "ok"))
+    last = fleet.clock.now
+    fleet.take()
+    for _ in range(int(ROBOT_TIMEOUT) - 1):  # components go STALE at 5 s: implied, not one event each
+        fleet.advance(1)
+        fleet.check()
+    assert fleet.take() == []
+    fleet.advance(1.5)
+    fleet.check()
+    assert fleet.take() == [
+        Event(
+            last + ROBOT_TIMEOUT,
+            "robot1",
+            "robot_down",
+            old_level=Level.WARN,
+            new_level=Level.STALE,
+            message="no diagnostics received for 10 s",
+        )
+    ]
+    fleet.advance(5)
+    fleet.check()
+    assert fleet.take() == []
+    fleet.publish("robot1", (1, "/a", "warm"), (0, "/b", "ok"))
+    fleet.check()
+    assert fleet.take() == [
+        Event(
+            fleet.clock.now,
+            "robot1",
+            "robot_up",
+            old_level=Level.STALE,
+            new_level=Level.WARN,
+            message="diagnostics received again",
+        )
+    ]
+
+
+def test_a_component_left_out_goes_missing_then_stale_then_appears_again() -> None:
+    fleet = started_fleet()
+    fleet.advance(1)
+    fleet.publish("robot1", (0, "/a", "ok"))
+    left_out = fleet.clock.now
+    fleet.check()
+    assert fleet.take() == [
+        Event(left_out, "robot1", "missing", "/b", "hw", Level.OK, None, "not in the robot's latest message")
+    ]
+    last_report = left_out - 1
+    for _ in range(6):
+        fleet.advance(1)
+        fleet.publish("robot1", (0, "/a", "ok"))
+        fleet.check()
+    assert fleet.take() == [
+        Event(
+            last_report + STALE_AFTER,
+            "robot1",
+            "level",
+            "/b",
+            "hw",
+            Level.OK,
+            Level.STALE,
+            "not reported for 5 s",
+        )
+    ]
+    fleet.advance(1)
+    fleet.publish("robot1", (0, "/a", "ok"), (2, "/b", "back, broken"))
+    fleet.check()
+    events = fleet.take()
+    assert kinds(events) == [("level", "/b"), ("appeared", "/b")]
+    assert (events[0].old_level, events[0].new_level, events[0].message) == (
+        Level.OK,
+        Level.ERROR,
+        "back, broken",
+    )
+    assert (events[1].old_level, events[1].new_level) == (None, Level.ERROR)
+
+
+def test_forgotten_components_and_robots_expire() -> None:
+    fleet = started_fleet()
+    fleet.publish("robot2", (0, "/x", "ok"))
+    fleet.check()
+    fleet.take()
+    for _ in range(int(EXPIRE_AFTER) + 2):
+        fleet.advance(1)
+        fleet.publish("robot1", (0, "/a", "ok"))  # /b silent from here on; robot2 silent altogether
+        fleet.check()
+    fleet.model.expire()
+    fleet.check()
+    events = fleet.take()
+    assert ("expired", "/b") in kinds(events)
+    robot2 = [e for e in events if e.robot == "robot2"]
+    assert [(e.kind, e.component, e.message) for e in robot2][-1] == (
+        "expired",
+        None,
+        "forgotten after 60 s of silence",
+    )
+    assert [e.kind for e in robot2] == ["robot_down", "expired"]
+
+
+def test_a_robot_known_but_never_heard_is_no_event_until_its_first_message() -> None:
+    fleet = Fleet()
+    assert fleet.model.register("robot1", "dds")
+    fleet.check()
+    fleet.advance(30)
+    fleet.check()
+    assert fleet.take() == []
+    fleet.publish("robot1", (0, "/a", "ok"))
+    fleet.check()
+    assert kinds(fleet.take()) == [("appeared", "/a"), ("robot_up", None)]
+
+
+def test_the_model_without_a_listener_sends_nothing() -> None:
+    fleet = Fleet()
+    fleet.model.set_level_listener(None)
+    fleet.publish("robot1", (0, "/a", "ok"))
+    fleet.advance(0.2)
+    fleet.publish("robot1", (2, "/a", "bad"))
+    assert fleet.take() == []

@@ -1,0 +1,338 @@
+"""The event store on a real SQLite file: batches, paging, filters, pruning, restarts and failures."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from prometheus_client import generate_latest
+from prometheus_client.registry import CollectorRegistry
+
+from overseer.history.events import Event
+from overseer.history.metrics import EventsCollector
+from overseer.history.query import EventQuery, decode_cursor
+from overseer.history.store import EventStore, EventsUnavailable, StoreSettings
+from overseer.levels import Level
+
+DAY = 86400.0
+HOSTILE = [
+    'quote"d',
+    "back\\slash",
+    "new\nline",
+    "unicode ☃ 🤖",
+    "<script>alert(1)</script>",
+    "nul\x00byte",
+    "",
+]
+
+
+class Clock:
+    """A hand-moved clock."""
+
+    def __init__(self) -> None:
+        """Start at a fixed unix time."""
+        self.now = 1_700_000_000.0
+
+    def __call__(self) -> float:
+        """The current time."""
+        return self.now
+
+
+def settings(path: Path, retention: float = 30 * DAY, max_size: int = 10**9, **extra: int) -> StoreSettings:
+    return StoreSettings(str(path), retention, max_size, **extra)  # type: ignore[arg-type]
+
+
+def level_event(at: float, robot: str = "robot1", component: str = "/Power/Battery", level: int = 2) -> Event:
+    return Event(
+        at,
+        robot,
+        "level",
+        component,
+        "",
+        Level.OK,
+        Level(level),
+        f"level {level} at {at}",
+        (("voltage", "11.2"), ("state", "charging")),
+    )
+
+
+def everything(store: EventStore, query: EventQuery | None = None) -> list[dict[str, object]]:
+    """Every matching event, page by page through the cursors."""
+    query = query or EventQuery(limit=1000)
+    found: list[dict[str, object]] = []
+    while True:
+        page, cursor = store.query(query)
+        found.extend(page)
+        if cursor is None:
+            return found
+        query = EventQuery(
+            query.robot,
+            query.component,
+            query.levels,
+            query.since,
+            query.until,
+            query.limit,
+            decode_cursor(cursor),
+        )
+
+
+def metrics(store: EventStore) -> str:
+    registry = CollectorRegistry()
+    registry.register(EventsCollector(store))
+    return generate_latest(registry).decode()
+
+
+def test_queued_events_are_written_in_batches_by_the_writer_thread(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    base = 1_700_000_000.0
+    for batch in range(50):
+        store.add([level_event(base + batch * 100 + i) for i in range(100)])
+    assert store.stats().written == 0  # nothing is written by `add` itself
+    store.start()
+    try:
+        deadline = time.monotonic() + 10
+        while store.stats().written < 5000 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert store.stats().written == 5000
+    finally:
+        store.stop()
+    connection = sqlite3.connect(tmp_path / "events.db")
+    assert connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    ids = [row[0] for row in connection.execute("SELECT id FROM events ORDER BY time")]
+    assert ids == list(range(1, 5001))
+
+
+def test_pages_are_newest_first_and_the_cursor_loses_nothing_even_at_equal_times(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    store.add([level_event(1000.0 + (i // 7), component=f"/c{i}") for i in range(250)])
+    store.flush()
+    first, cursor = store.query(EventQuery(limit=100))
+    assert len(first) == 100 and cursor is not None
+    events = everything(store, EventQuery(limit=33))
+    assert len(events) == 250 and len({e["id"] for e in events}) == 250
+    keys = [(e["time"], e["id"]) for e in events]
+    assert keys == sorted(keys, reverse=True)
+    assert events[:100] == first
+    last_page, cursor = store.query(EventQuery(limit=250))
+    assert cursor is None and len(last_page) == 250
+
+
+def test_filters_robot_exact_component_substring_levels_and_time_range(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    store.add(
+        [
+            level_event(100, "robot1", "/Power/Battery", 2),
+            level_event(101, "robot1", "/Power/Laptop Battery", 1),
+            level_event(102, "robot10", "/Power/Battery", 2),
+            level_event(103, "robot1", "/Motor/Motor1", 0),
+            Event(104, "robot1", "robot_down", old_level=Level.OK, new_level=Level.STALE, message="gone"),
+        ]
+    )
+    store.flush()
+
+    def times(**filters: object) -> list[object]:
+        return [e["time"] for e in store.query(EventQuery(**filters))[0]]  # type: ignore[arg-type]
+
+    assert times(robot="robot1") == [104, 103, 101, 100]
+    assert times(component="Battery") == [102, 101, 100]
+    assert times(component="battery") == []  # case-sensitive
+    assert times(levels=(Level.ERROR, Level.WARN)) == [102, 101, 100]
+    assert times(levels=(Level.STALE,)) == [104]
+    assert times(since=101, until=103) == [103, 102, 101]
+    assert times(robot="robot1", component="Power", levels=(Level.ERROR,)) == [100]
+
+
+def test_the_document_has_the_contracts_shape(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    store.add([level_event(1700000000.5), Event(1700000001.0, "robot1", "robot_down", new_level=Level.STALE)])
+    store.flush()
+    down, level = store.query(EventQuery())[0]
+    assert level == {
+        "id": 1,
+        "time": 1700000000.5,
+        "robot": "robot1",
+        "component": "/Power/Battery",
+        "hardware_id": "",
+        "kind": "level",
+        "old_level": 0,
+        "new_level": 2,
+        "old_state": "OK",
+        "new_state": "ERROR",
+        "message": "level 2 at 1700000000.5",
+        "values": [{"key": "voltage", "value": "11.2"}, {"key": "state", "value": "charging"}],
+    }
+    assert down["component"] is None and down["hardware_id"] is None and down["old_state"] is None
+
+
+def test_hostile_strings_are_stored_and_returned_intact(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    store.add(
+        [
+            Event(1000.0 + i, text or "r", "level", text, text, Level.OK, Level.WARN, text, ((text, text),))
+            for i, text in enumerate(HOSTILE)
+        ]
+    )
+    store.flush()
+    store.stop()
+    reopened = EventStore(settings(tmp_path / "events.db"))
+    returned = list(reversed(reopened.query(EventQuery())[0]))
+    assert [(e["component"], e["hardware_id"], e["message"]) for e in returned] == [
+        (t, t, t) for t in HOSTILE
+    ]
+    assert [e["values"] for e in returned] == [[{"key": t, "value": t}] for t in HOSTILE]
+    assert [e["robot"] for e in returned] == [t or "r" for t in HOSTILE]
+    assert [e["robot"] for e in reopened.query(EventQuery(robot='quote"d'))[0]] == ['quote"d']
+
+
+def test_events_survive_a_restart_and_ids_keep_growing_after_pruning(tmp_path: Path) -> None:
+    clock = Clock()
+    path = tmp_path / "events.db"
+    store = EventStore(settings(path, retention=DAY), clock=clock)
+    store.add([level_event(clock.now - 2 * DAY), level_event(clock.now - 1)])
+    store.flush()
+    store.stop()
+    again = EventStore(settings(path, retention=DAY), clock=clock)
+    assert [e["id"] for e in again.query(EventQuery())[0]] == [2, 1]
+    assert again.prune() == 1
+    again.add([level_event(clock.now)])
+    again.flush()
+    assert [e["id"] for e in again.query(EventQuery())[0]] == [3, 2]
+    again.stop()
+
+
+def test_retention_drops_old_events_at_start_and_on_prune(tmp_path: Path) -> None:
+    clock = Clock()
+    path = tmp_path / "events.db"
+    store = EventStore(settings(path, retention=DAY), clock=clock)
+    store.add([level_event(clock.now - 3 * DAY + i * DAY) for i in range(4)])
+    store.flush()
+    assert store.prune() == 2
+    assert len(store.query(EventQuery())[0]) == 2
+    clock.now += DAY
+    store.start()  # the writer prunes as it starts
+    try:
+        assert [e["time"] for e in store.query(EventQuery())[0]] == [clock.now - DAY]
+    finally:
+        store.stop()
+
+
+def test_the_size_cap_deletes_the_oldest_and_shrinks_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "events.db"
+    cap = 1_000_000
+    store = EventStore(settings(path, max_size=cap))
+    big = "x" * 2000
+    newest = 0.0
+    for batch in range(30):  # about 3 MB written into a 1 MB cap
+        events = [
+            Event(float(batch * 50 + i), "robot1", "level", "/c", "", Level.OK, Level.ERROR, big)
+            for i in range(50)
+        ]
+        newest = events[-1].time
+        store.add(events)
+        store.flush()
+    kept = everything(store)
+    assert kept[0]["time"] == newest
+    assert 0 < len(kept) < 1500
+    times = sorted(float(e["time"]) for e in kept)  # type: ignore[arg-type]
+    assert times == [float(t) for t in range(int(times[0]), int(newest) + 1)]  # only the oldest went
+    assert os.path.getsize(path) <= cap * 1.1
+    store.stop()
+
+
+def test_a_full_queue_drops_and_counts(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db", queue_limit=100))
+    store.add([level_event(float(i)) for i in range(80)])
+    store.add([level_event(float(i)) for i in range(50)])
+    store.add([level_event(1.0)])
+    assert store.flush() == 100
+    stats = store.stats()
+    assert stats.dropped["queue_full"] == 31 and stats.written == 100
+    assert 'overseer_events_dropped_total{reason="queue_full"} 31.0' in metrics(store)
+
+
+def test_a_corrupt_file_degrades_the_store_and_says_so(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "events.db"
+    path.write_bytes(b"this is not a database, it is a shopping list\n" * 200)
+    store = EventStore(settings(path))
+    assert not store.available
+    assert store.problem is not None and str(path) in store.problem and "delete it" in store.problem
+    assert "events are not being written" in caplog.text
+    store.start()
+    store.add([level_event(1.0), level_event(2.0)])
+    with pytest.raises(EventsUnavailable):
+        store.query(EventQuery())
+    exposition = metrics(store)
+    assert "overseer_events_store_up 0.0" in exposition
+    assert 'overseer_events_dropped_total{reason="store_unavailable"} 2.0' in exposition
+    store.stop()
+    assert path.read_bytes().startswith(b"this is not a database")  # left for the operator to look at
+
+
+def test_another_sqlite_database_is_not_taken_for_an_event_database(tmp_path: Path) -> None:
+    path = tmp_path / "other.db"
+    other = sqlite3.connect(path)
+    other.execute("CREATE TABLE inventory (item TEXT)")
+    other.commit()
+    other.close()
+    store = EventStore(settings(path))
+    assert not store.available and "not an Overseer event database" in (store.problem or "")
+
+
+def test_a_missing_directory_degrades_the_store(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "no" / "such" / "dir" / "events.db"))
+    assert not store.available
+    assert "does not exist" in (store.problem or "")
+
+
+@contextmanager
+def read_only_directory(path: Path) -> Iterator[Path]:
+    """A directory nobody can write to: a read-only tmpfs for root, mode 0500 for anyone else."""
+    path.mkdir()
+    if os.geteuid() == 0:
+        subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(path)], check=True)
+        try:
+            yield path
+        finally:
+            subprocess.run(["umount", str(path)], check=True)
+    else:
+        path.chmod(0o500)
+        try:
+            yield path
+        finally:
+            path.chmod(0o700)
+
+
+def test_an_unwritable_directory_degrades_the_store(tmp_path: Path) -> None:
+    with read_only_directory(tmp_path / "ro") as directory:
+        store = EventStore(settings(directory / "events.db"))
+        assert not store.available
+        assert "cannot open the event database" in (store.problem or "")
+        store.add([level_event(1.0)])
+        assert store.stats().dropped["store_unavailable"] == 1
+
+
+def test_a_failing_write_drops_the_batch_counts_it_and_the_next_write_recovers(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    store.add([level_event(1.0)])
+    store.flush()
+    assert store._writer is not None
+    pages = store._writer.execute("PRAGMA page_count").fetchone()[0]
+    store._writer.execute(f"PRAGMA max_page_count = {pages}")  # a full disk, as SQLite sees it
+    store.add([level_event(2.0 + i, component="/c" * 500) for i in range(200)])
+    assert store.flush() == 0
+    stats = store.stats()
+    assert stats.dropped["write_error"] == 200 and not stats.up
+    assert "overseer_events_store_up 0.0" in metrics(store)
+    store._writer.execute("PRAGMA max_page_count = 1073741823")
+    store.add([level_event(500.0)])
+    assert store.flush() == 1
+    assert store.stats().up
+    assert [e["time"] for e in store.query(EventQuery())[0]] == [500.0, 1.0]
