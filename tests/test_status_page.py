@@ -83,7 +83,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Exporter]:
     tmp = tmp_path_factory.mktemp("fleet")
     domain = fresh_domain_id()
     with (
-        running_exporter(tmp, domain) as exporter,
+        running_exporter(tmp, domain, f"--events.path={tmp / 'events.db'}") as exporter,
         running_simulator(
             tmp, domain, "--robots=2", "--warn=1", "--error=0", "--event=0:robot2:/Motor/Motor1:ERROR"
         ),
@@ -356,7 +356,7 @@ def test_timeline_says_no_history_when_the_exporter_has_none_faked_older_exporte
 
 def test_timeline_shows_a_change_made_during_the_test(page: Page, tmp_path: Path, dds_domain: int) -> None:
     with (
-        running_exporter(tmp_path, dds_domain) as exporter,
+        running_exporter(tmp_path, dds_domain, f"--events.path={tmp_path / 'events.db'}") as exporter,
         running_simulator(tmp_path, dds_domain, "--robots=1", "--event=12:robot1:/Temp/Sensor1:ERROR"),
     ):
         wait_for(lambda: exporter.robot("robot1"), 30, message="robot1")
@@ -374,7 +374,7 @@ def test_timeline_shows_a_change_made_during_the_test(page: Page, tmp_path: Path
 
 
 def test_status_page_reports_an_exporter_that_went_away(page: Page, tmp_path: Path, dds_domain: int) -> None:
-    with running_exporter(tmp_path, dds_domain) as exporter:
+    with running_exporter(tmp_path, dds_domain, f"--events.path={tmp_path / 'events.db'}") as exporter:
         open_page(page, exporter.url + "/")
         expect(page.locator("#error")).to_have_text("")
         exporter.stop()
