@@ -7,8 +7,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from overseer.levels import Level, severity_rank
+from overseer.levels import Level, severity_rank, worst
 from overseer.model import Component, FleetSnapshot, RobotState
+
+_COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 
 
 def robots_document(snapshot: FleetSnapshot) -> dict[str, Any]:
@@ -48,10 +50,10 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
 
 def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]:
     up = snapshot.robot_up(robot)
-    counts = dict.fromkeys(("ok", "warn", "error", "stale"), 0)
-    for key, component in robot.components.items():
-        counts[snapshot.component_level(robot, key, component, up).name.lower()] += 1
-    level = snapshot.robot_level(robot)
+    # One pass of the snapshot's bulk judgement; list.count compares in C (1,000 robots: the page waits on it)
+    levels = snapshot.component_levels(robot, up)
+    counts = {name: levels.count(level) for level, name in _COUNT_NAMES}
+    level = worst(level for level, name in _COUNT_NAMES if counts[name]) if up else Level.STALE
     return {
         "robot": robot.name,
         "level": int(level),

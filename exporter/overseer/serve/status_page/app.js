@@ -64,13 +64,15 @@ async function renderFleet(current) {
 async function renderRobot(current) {
   if (timeline === null || timeline.robot !== current.robot) timeline = new Timeline(current.robot);
   const path = `api/v1/robots/${current.robot.split("/").map(encodeURIComponent).join("/")}`;
-  const [robots, robot] = await Promise.all([
-    getJson("api/v1/robots"),
+  // the fleet's counts at the top come when they come: the robot's own view does not wait for them
+  getJson("api/v1/robots").then((robots) => {
+    if (current === view) renderSummary(robots, {...current, levels: new Set()}, toggleLevel);
+  }, () => {});
+  const [robot] = await Promise.all([
     getJson(path).catch((error) => (error.status === 404 ? null : Promise.reject(error))),
     timeline.refresh().catch((error) => timeline.fail(error)),
   ]);
   if (current !== view) return false;
-  renderSummary(robots, {...current, levels: new Set()}, toggleLevel);
   document.getElementById("back").href = pageHref(fleetQuery(current));
   const title = document.getElementById("robot-title");
   const tree = document.getElementById("tree");
