@@ -22,6 +22,7 @@ from overseer.serve.api import (
     ComponentQueryError,
     components_document,
     parse_component_query,
+    robots_document,
 )
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.http import OverseerServer
@@ -228,3 +229,29 @@ def test_the_page_files_are_served_with_their_types_and_a_strict_policy(server: 
     assert status == 404 and "no such path" in document["error"]
     status, _ = get(server, "/static/nothing.js")
     assert status == 404
+
+
+def test_fleet_summary_counts_levels_now_and_ranks_the_robot_by_severity() -> None:
+    clock = ManualClock()
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=30), clock=clock)
+    model.apply("mixed", array((1, "/a", "", ""), (2, "/b", "", "")), "dds")
+    model.apply("gone", array((2, "/a", "", "")), "dds")
+    clock.now += 6
+    model.apply("mixed", array((1, "/a", "", "")), "dds")  # /b is missing from it now: STALE, not ERROR
+    model.register("silent", "dds")
+    clock.now += 25  # gone is down (31 s), mixed is not (25 s) but all its components are stale now
+    model.apply("fresh", array((0, "/a", "", ""), (3, "/b", "", "")), "dds")
+    summaries = {r["robot"]: r for r in robots_document(model.snapshot())["robots"]}
+    assert {name: (r["state"], r["up"], r["counts"]) for name, r in summaries.items()} == {
+        "fresh": ("STALE", True, {"ok": 1, "warn": 0, "error": 0, "stale": 1}),
+        "gone": ("STALE", False, {"ok": 0, "warn": 0, "error": 0, "stale": 1}),
+        "mixed": ("STALE", True, {"ok": 0, "warn": 0, "error": 0, "stale": 2}),
+        "silent": ("STALE", False, {"ok": 0, "warn": 0, "error": 0, "stale": 0}),
+    }
+    clock.now -= 24  # 1 s after mixed's last message: /a WARN fresh, /b stale; WARN outranks STALE
+    mixed = next(r for r in robots_document(model.snapshot())["robots"] if r["robot"] == "mixed")
+    assert (mixed["level"], mixed["state"], mixed["counts"]) == (
+        1,
+        "WARN",
+        {"ok": 0, "warn": 1, "error": 0, "stale": 1},
+    )
