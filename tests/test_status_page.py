@@ -372,6 +372,25 @@ def test_timeline_shows_a_change_made_during_the_test(page: Page, tmp_path: Path
             "data-state", "ERROR"
         )
 
+        others = page.locator('#timeline-events li:not([data-component="/Temp/Sensor1"])')
+        assert others.count() > 0  # the robot's other components appeared too
+        page.click('#tree button[data-history="/Temp/Sensor1"]')  # narrow the history to that component
+        assert query_of(page) == {"robot": ["robot1"], "component": ["/Temp/Sensor1"]}
+        expect(others).to_have_count(0)
+        expect(change).to_have_count(1)
+        expect(page.locator("#timeline-component")).to_contain_text("only /Temp/Sensor1")
+
+        folder = page.locator('#tree details[data-path="/Temp"]')
+        was_open = folder.evaluate("d => d.open")
+        page.click('#tree details[data-path="/Temp"] > summary button[data-history="/Temp"]')
+        assert query_of(page) == {"robot": ["robot1"], "component": ["/Temp"]}
+        expect(page.locator('#timeline-events li[data-component="/Temp"]').first).to_be_attached()
+        expect(change).to_have_count(1)  # "/Temp" narrows to every component whose name contains it
+        assert folder.evaluate("d => d.open") == was_open
+        page.click("#timeline-all")
+        assert query_of(page) == {"robot": ["robot1"]}
+        expect(others.first).to_be_attached()
+
 
 def test_status_page_reports_an_exporter_that_went_away(page: Page, tmp_path: Path, dds_domain: int) -> None:
     with running_exporter(tmp_path, dds_domain, f"--events.path={tmp_path / 'events.db'}") as exporter:

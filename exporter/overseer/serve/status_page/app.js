@@ -21,14 +21,14 @@ let rendered = false;
 
 function setView(next, how) {
   view = next;
-  const query = view.robot !== null ? robotQuery(view.robot) : fleetQuery(view);
+  const query = view.robot !== null ? robotQuery(view.robot, view.component) : fleetQuery(view);
   if (how === "push") history.pushState(null, "", pageHref(query));
   else if (how === "replace") history.replaceState(null, "", pageHref(query));
   refresh();
 }
 
 function openRobot(name) {
-  setView({...view, robot: name}, "push");
+  setView({...view, robot: name, component: null}, "push");
   window.scrollTo(0, 0);
 }
 
@@ -61,8 +61,14 @@ async function renderFleet(current) {
   return true;
 }
 
+function showHistoryOf(component) {
+  setView({...view, component}, "push");
+}
+
 async function renderRobot(current) {
-  if (timeline === null || timeline.robot !== current.robot) timeline = new Timeline(current.robot);
+  if (timeline === null || timeline.robot !== current.robot || timeline.component !== current.component) {
+    timeline = new Timeline(current.robot, current.component);
+  }
   const path = `api/v1/robots/${current.robot.split("/").map(encodeURIComponent).join("/")}`;
   // the fleet's counts at the top come when they come: the robot's own view does not wait for them
   getJson("api/v1/robots").then((robots) => {
@@ -88,13 +94,26 @@ async function renderRobot(current) {
       `${robot.transport} · last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})`
       + ` · ${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`;
     const folders = folderMemory(current.robot);
-    renderTree(tree, buildTree(robot.components), robot.generated_at, folders);
+    renderTree(tree, buildTree(robot.components), robot.generated_at, folders, showHistoryOf);
   }
+  const narrowed = document.getElementById("timeline-component");
+  narrowed.hidden = current.component === null;
+  narrowed.replaceChildren(`only ${current.component ?? ""} · `, allHistoryLink(current.robot));
   timeline.render();
   document.getElementById("fleet-view").hidden = true;
   document.getElementById("robot-view").hidden = false;
   document.title = `${current.robot} — Overseer`;
   return true;
+}
+
+function allHistoryLink(robot) {
+  const link = element("a", {href: pageHref(robotQuery(robot)), id: "timeline-all"}, "every component");
+  link.addEventListener("click", (event) => {
+    if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+    event.preventDefault();
+    setView({...view, component: null}, "push");
+  });
+  return link;
 }
 
 function folderMemory(robot) {

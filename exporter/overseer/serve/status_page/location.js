@@ -1,12 +1,13 @@
 // The page's state lives in its URL, so that every view has a deep link an alert can point at:
 //   fleet view  ?level=ERROR,WARN&q=TEXT&sort=KEY
 //   robot view  ?robot=<percent-encoded robot name>   (names may contain "/")
+//               &component=<name>   its timeline narrowed to components whose name contains this
 
 import {STATES} from "./dom.js";
 
 export const SORTS = ["name", "level", "errors", "last_message"];
 
-/** The view a URL's query asks for: {robot, levels (a Set of state names), q, sort}. */
+/** The view a URL's query asks for: {robot, component, levels (a Set of state names), q, sort}. */
 export function readQuery(search) {
   const params = new URLSearchParams(search);
   const levels = new Set();
@@ -19,6 +20,7 @@ export function readQuery(search) {
   const sort = params.get("sort");
   return {
     robot: params.get("robot"),
+    component: params.get("robot") !== null ? params.get("component") : null,
     levels,
     q: params.get("q") || "",
     sort: SORTS.includes(sort) ? sort : "name",
@@ -34,9 +36,10 @@ export function fleetQuery(view) {
   return parts.length ? `?${parts.join("&")}` : "";
 }
 
-/** The query string of one robot's view. */
-export function robotQuery(name) {
-  return `?robot=${encodeURIComponent(name)}`;
+/** The query string of one robot's view, its timeline narrowed to `component` when given. */
+export function robotQuery(name, component = null) {
+  const narrowed = component === null ? "" : `&component=${encodeURIComponent(component)}`;
+  return `?robot=${encodeURIComponent(name)}${narrowed}`;
 }
 
 /** A page link: this page's path with `query` ("" keeps the bare path). */

@@ -4,11 +4,13 @@
 import {badge, element, getJson, timeText} from "./dom.js";
 
 const PAGE_SIZE = 50;
+const KEPT = 1000;  // events kept in the page; older ones are dropped (the exporter still has them)
 
-/** The events of one robot: the newest page, refreshed, and older pages the user asked for. */
+/** The events of one robot (of its components whose name contains `component`, when given). */
 export class Timeline {
-  constructor(robot) {
+  constructor(robot, component) {
     this.robot = robot;
+    this.component = component;
     this.events = new Map();  // id → event, every page loaded so far
     this.next = null;  // cursor of the page after the oldest loaded one
     this.available = true;
@@ -32,12 +34,14 @@ export class Timeline {
 
   async fetch(before) {
     const query = new URLSearchParams({robot: this.robot, limit: String(PAGE_SIZE)});
+    if (this.component !== null) query.set("component", this.component);
     if (before !== null) query.set("before", before);
     try {
       const page = await getJson(`api/v1/events?${query}`);
       this.available = true;
       this.error = null;
       for (const event of page.events) this.events.set(event.id, event);
+      if (this.events.size > KEPT) this.dropOldest();
       return page;
     } catch (error) {
       if (error.status === 404) {
@@ -46,6 +50,12 @@ export class Timeline {
       }
       throw error;
     }
+  }
+
+  dropOldest() {
+    const newest = [...this.events.values()].sort((a, b) => b.time - a.time || b.id - a.id).slice(0, KEPT);
+    this.events = new Map(newest.map((event) => [event.id, event]));
+    this.next = null;  // what was dropped is no longer "older than the oldest shown"
   }
 
   /** Show the loaded events, newest first. */
@@ -89,7 +99,7 @@ function describe(event) {
     case "robot_down": return "robot down";
     case "robot_up": return "robot up";
     case "appeared": return `appeared${event.new_state ? ` as ${event.new_state}` : ""}`;
-    case "missing": return "missing from the robot's messages";
+    case "missing": return "missing";
     case "expired": return "expired";
     default: return String(event.kind);
   }

@@ -37,21 +37,38 @@ function rollUp(node) {
   return node.state;
 }
 
-/** Render `tree` into `container`; folders open as `openFolders` says, else when something is not OK. */
-export function renderTree(container, tree, now, openFolders) {
-  container.replaceChildren(...[...tree.children.values()].map((node) => renderNode(node, now, openFolders)));
+/** Render `tree` into `container`; folders open as `openFolders` says, else when something is not OK.
+
+`onHistory(name)` narrows the timeline to the components whose name contains `name`. */
+export function renderTree(container, tree, now, openFolders, onHistory) {
+  const render = (node) => renderNode(node, now, openFolders, onHistory);
+  container.replaceChildren(...[...tree.children.values()].map(render));
 }
 
-function renderNode(node, now, openFolders) {
+function historyButton(name, onHistory) {
+  const button = element("button", {type: "button", class: "history", "data-history": name,
+                                    title: "show only this in the history"}, "history");
+  button.addEventListener("click", (event) => {
+    event.preventDefault();  // inside a folder's summary: do not open or close it
+    event.stopPropagation();
+    onHistory(name);
+  });
+  return button;
+}
+
+function renderNode(node, now, openFolders, onHistory) {
+  const historyName = node.own.length ? node.own[0].name : node.path;
   if (!node.children.size) {
     return element("div", {class: "leaf", "data-path": node.path, "data-state": node.state},
-      ...node.own.flatMap((c, i) => [...(i ? [element("br")] : []), ...componentParts(c, node.name, now)]));
+      ...node.own.flatMap((c, i) => [...(i ? [element("br")] : []), ...componentParts(c, node.name, now)]),
+      historyButton(historyName, onHistory));
   }
   const details = element("details", {class: "folder", "data-path": node.path, "data-state": node.state,
                                        open: openFolders.get(node.path) ?? node.state !== "OK"},
     element("summary", {}, badge(node.state), " ", element("span", {class: "node-name"}, node.name),
-      ...node.own.flatMap((c) => [" ", element("span", {class: "message", "data-component": c.name, "data-state": c.state}, c.message)])),
-    ...[...node.children.values()].map((child) => renderNode(child, now, openFolders)));
+      ...node.own.flatMap((c) => [" ", element("span", {class: "message", "data-component": c.name, "data-state": c.state}, c.message)]),
+      " ", historyButton(historyName, onHistory)),
+    ...[...node.children.values()].map((child) => renderNode(child, now, openFolders, onHistory)));
   details.firstChild.addEventListener("click", () => openFolders.set(node.path, !details.open));
   return details;
 }
