@@ -20,6 +20,7 @@ BENCHMARKS = (
     "bench.bench_check",
     "bench.bench_robot_side",
     "bench.bench_status_page",
+    "bench.bench_events",
 )
 
 

@@ -16,6 +16,7 @@ def test_demo_serves_the_simulated_fleet_within_15_seconds(tmp_path: Path, dds_d
     process = spawn(
         [*overseer_command(), "demo", f"--web.listen-address=127.0.0.1:{port}", f"--domain={dds_domain}"],
         log_path,
+        cwd=tmp_path,
     )
     demo = Exporter(process, log_path, f"http://127.0.0.1:{port}")
     try:

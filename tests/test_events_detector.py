@@ -258,6 +258,12 @@ def test_a_robot_known_but_never_heard_is_no_event_until_its_first_message() -> 
     fleet.publish("robot1", (0, "/a", "ok"))
     fleet.check()
     assert kinds(fleet.take()) == [("appeared", "/a"), ("robot_up", None)]
+    assert fleet.model.register("robot2", "dds")
+    fleet.check()
+    fleet.advance(EXPIRE_AFTER + 1)
+    assert fleet.model.expire() == ["robot1", "robot2"]
+    fleet.check()
+    assert [(e.robot, e.kind) for e in fleet.take()] == [("robot1", "expired")]  # robot2 was never heard
 
 
 def test_the_model_without_a_listener_sends_nothing() -> None:

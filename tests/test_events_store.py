@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import sqlite3
 import subprocess
@@ -274,6 +275,19 @@ def test_a_corrupt_file_degrades_the_store_and_says_so(
     assert 'overseer_events_dropped_total{reason="store_unavailable"} 2.0' in exposition
     store.stop()
     assert path.read_bytes().startswith(b"this is not a database")  # left for the operator to look at
+
+
+def test_a_degraded_store_still_logs_its_events_without_ids(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "events.db"
+    path.write_bytes(b"garbage" * 1000)
+    store = EventStore(settings(path, log_events=True))
+    with caplog.at_level(logging.INFO, logger="overseer.events"):
+        store.add([level_event(7.0)])
+    (record,) = [r for r in caplog.records if r.name == "overseer.events"]
+    assert record.event["id"] is None and record.event["time"] == 7.0  # type: ignore[attr-defined]
+    assert record.event["message"] == "level 2 at 7.0"  # type: ignore[attr-defined]
 
 
 def test_another_sqlite_database_is_not_taken_for_an_event_database(tmp_path: Path) -> None:

@@ -216,7 +216,7 @@ def exporter_over(tmp_path: Path, link: VethNamespace, domain: int) -> Iterator[
         *FAST,
     ]
     log_path = tmp_path / "exporter-veth.log"
-    exporter = Exporter(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path, cwd=tmp_path), log_path, f"http://127.0.0.1:{port}")
     try:
         wait_until_healthy(exporter, 30)
         yield exporter

@@ -397,7 +397,7 @@ def secured_exporter(tmp_path: Path, domain: int, web_config: Path, *extra: str)
         *extra,
     ]
     log_path = tmp_path / f"exporter-{port}.log"
-    exporter = Exporter(spawn(args, log_path), log_path, f"https://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path, cwd=tmp_path), log_path, f"https://127.0.0.1:{port}")
     try:
         yield exporter
     finally:

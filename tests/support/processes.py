@@ -88,8 +88,10 @@ class Exporter(RunningProcess):
             raise
 
 
-def spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
-    """Start `args` in its own session with stdout and stderr going to `log_path`."""
+def spawn(
+    args: Sequence[str], log_path: Path, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.Popen[bytes]:
+    """Start `args` in its own session with stdout and stderr going to `log_path` (in `cwd` if given)."""
     log = log_path.open("wb")
     try:
         return subprocess.Popen(
@@ -98,6 +100,7 @@ def spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = None
             stderr=subprocess.STDOUT,
             env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
             start_new_session=True,
+            cwd=cwd,
         )
     finally:
         log.close()
@@ -107,7 +110,10 @@ def spawn(args: Sequence[str], log_path: Path, env: dict[str, str] | None = None
 def running_exporter(
     tmp_path: Path, domain: int | None, *extra_args: str, port: int | None = None, timeout: float = 30.0
 ) -> Iterator[Exporter]:
-    """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends."""
+    """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends.
+
+    It runs in `tmp_path`, so its files (the event history's database) stay with the test.
+    """
     port = port or free_port()
     args = [
         *overseer_command(),
@@ -118,7 +124,7 @@ def running_exporter(
         *extra_args,
     ]
     log_path = tmp_path / f"exporter-{port}.log"
-    exporter = Exporter(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path, cwd=tmp_path), log_path, f"http://127.0.0.1:{port}")
     try:
         wait_until_healthy(exporter, timeout)
         yield exporter

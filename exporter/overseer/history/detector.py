@@ -4,12 +4,13 @@ Reported level changes come from the model's level listener, called as each mess
 change is seen with its exact message and time, even one that flips back within a second, and it costs
 nothing while levels hold. STALE, robot down and up, missing and expired follow from time or from
 messages that changed nothing a listener would see, so `check` compares each snapshot with the last
-one (every second or so). Comparing is cheap because robot states are immutable and shared: a robot
-that only republished keeps its components mapping and its (usually empty, shared) missing set.
+one (every second or so). Comparing is cheap: a robot that is up, as before, and reports every one of
+its components (the model's shared empty missing set) has nothing to judge.
 
 A robot that stops publishing gives one `robot_down` event at `robot_timeout`; its components going
 STALE with it are implied, not recorded one by one. A component missing from messages its robot still
-sends gives `missing`, then `level` → STALE at `stale_after`, and `appeared` when it is reported again.
+sends gives `missing`, then `level` → STALE at `stale_after`, and `appeared` when it is reported again
+or `expired` when the model forgets it (only such components expire while their robot lives).
 """
 
 from __future__ import annotations
@@ -26,13 +27,17 @@ EventSink = Callable[[list[Event]], None]
 
 @dataclass(slots=True)
 class _Seen:
-    """What the last check saw of one robot."""
+    """What the last check saw of one robot.
+
+    Nothing here holds a robot's components mapping: a mapping kept a second longer than the model
+    keeps it survives into the garbage collector's older generations, and at 1,000 robots changing
+    every second that doubled the cost of applying messages.
+    """
 
     heard: bool
     up: bool
-    last_message: float | None
-    components: Mapping[ComponentKey, Component]
-    missing: frozenset[ComponentKey]
+    missing: frozenset[ComponentKey]  # the model's own set (usually its one shared empty set)
+    missing_levels: dict[ComponentKey, Level]  # the reported level of each missing component
     stale: frozenset[ComponentKey]  # missing components already reported STALE
 
 
@@ -71,25 +76,29 @@ class TransitionDetector:
         """Compare `snapshot` with the last one checked and send the transitions time brought."""
         events: list[Event] = []
         seen = self._seen
-        present = set()
+        taken_at, timeout = snapshot.taken_at, self._limits.robot_timeout
         for robot in snapshot.robots:
-            present.add(robot.name)
             before = seen.get(robot.name)
-            up = snapshot.robot_up(robot)
+            last = robot.last_message
+            up = last is not None and taken_at - last <= timeout  # as snapshot.robot_up, inlined
             if before is None:
-                before = _Seen(False, False, None, robot.components, robot.missing, _NONE)
-                seen[robot.name] = before
+                before = seen[robot.name] = _Seen(False, False, _NONE, {}, _NONE)
+            elif up is before.up and not robot.missing and not before.missing:
+                continue  # the common case: a robot up (or down) as before, reporting all its components
             self._robot_transitions(snapshot, robot, before, up, events)
-        for name in [name for name in seen if name not in present]:
-            del seen[name]
-            events.append(
-                Event(
-                    snapshot.taken_at,
-                    name,
-                    "expired",
-                    message=f"forgotten after {self._limits.expire_after:g} s of silence",
+        if len(seen) > len(snapshot.robots):
+            present = {robot.name for robot in snapshot.robots}
+            for name in [name for name in seen if name not in present]:
+                if not seen.pop(name).heard:
+                    continue  # discovered but never heard from: it never had an event either
+                events.append(
+                    Event(
+                        taken_at,
+                        name,
+                        "expired",
+                        message=f"forgotten after {self._limits.expire_after:g} s of silence",
+                    )
                 )
-            )
         if events:
             self._sink(events)
 
@@ -98,14 +107,14 @@ class TransitionDetector:
     ) -> None:
         limits = self._limits
         name = robot.name
+        last = robot.last_message if robot.last_message is not None else snapshot.taken_at
         if before.up and not up:
-            last = robot.last_message if robot.last_message is not None else snapshot.taken_at
             events.append(
                 Event(
                     last + limits.robot_timeout,
                     name,
                     "robot_down",
-                    old_level=_reported_worst(before.components),
+                    old_level=_reported_worst(robot.components),  # unchanged since it went silent
                     new_level=Level.STALE,
                     message=f"no diagnostics received for {limits.robot_timeout:g} s",
                 )
@@ -113,7 +122,7 @@ class TransitionDetector:
         elif up and not before.up:
             events.append(
                 Event(
-                    robot.last_message if robot.last_message is not None else snapshot.taken_at,
+                    last,
                     name,
                     "robot_up",
                     old_level=Level.STALE if before.heard else None,
@@ -121,43 +130,24 @@ class TransitionDetector:
                     message="diagnostics received again" if before.heard else "first diagnostics received",
                 )
             )
-        stale = before.stale
         if up and (robot.missing or before.missing):
-            stale = self._missing_transitions(snapshot, robot, before, events)
-        components = robot.components
-        if components is not before.components and not before.components.keys() <= components.keys():
-            for key, component in before.components.items():
-                if key not in components:
-                    events.append(
-                        Event(
-                            snapshot.taken_at,
-                            name,
-                            "expired",
-                            key[0],
-                            key[1],
-                            old_level=component.level,
-                            message=f"forgotten after {limits.expire_after:g} s of silence",
-                        )
-                    )
+            self._missing_transitions(snapshot, robot, before, events)
         before.heard = before.heard or robot.last_message is not None
         before.up = up
-        before.last_message = robot.last_message
-        before.components = components
-        before.missing = robot.missing
-        before.stale = stale.intersection(robot.missing) if stale else _NONE
 
     def _missing_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, events: list[Event]
-    ) -> frozenset[ComponentKey]:
-        """Events of components leaving or re-entering the robot's messages; the ones now STALE."""
-        name = robot.name
+    ) -> None:
+        """Components leaving the robot's messages, going STALE, coming back, or forgotten while away."""
+        name, limits = robot.name, self._limits
         at = robot.last_message if robot.last_message is not None else snapshot.taken_at
-        components = robot.components
-        missing = robot.missing
+        components, missing = robot.components, robot.missing
+        levels = before.missing_levels
         if missing != before.missing:
             for key in missing - before.missing:
                 component = components.get(key)
                 if component is not None:
+                    levels[key] = component.level
                     events.append(
                         Event(
                             at,
@@ -171,7 +161,20 @@ class TransitionDetector:
                     )
             for key in before.missing - missing:
                 component = components.get(key)
-                if component is not None:
+                level = levels.pop(key, None)
+                if component is None:  # expiry forgets only components that stopped being reported
+                    events.append(
+                        Event(
+                            snapshot.taken_at,
+                            name,
+                            "expired",
+                            key[0],
+                            key[1],
+                            old_level=level,
+                            message=f"forgotten after {limits.expire_after:g} s of silence",
+                        )
+                    )
+                else:
                     events.append(
                         Event(
                             at,
@@ -184,8 +187,7 @@ class TransitionDetector:
                             values=component.values,
                         )
                     )
-        stale = set(before.stale)
-        stale_after = self._limits.stale_after
+        stale = set(before.stale.intersection(missing))
         for key in missing:
             component = components.get(key)
             if component is None or key in stale:
@@ -195,17 +197,18 @@ class TransitionDetector:
                 stale.add(key)
                 events.append(
                     Event(
-                        updated + stale_after,
+                        updated + limits.stale_after,
                         name,
                         "level",
                         key[0],
                         key[1],
                         old_level=component.level,
                         new_level=Level.STALE,
-                        message=f"not reported for {stale_after:g} s",
+                        message=f"not reported for {limits.stale_after:g} s",
                     )
                 )
-        return frozenset(stale)
+        before.missing = missing
+        before.stale = frozenset(stale) if stale else _NONE
 
 
 def _reported_worst(components: Mapping[ComponentKey, Component]) -> Level:

@@ -30,8 +30,8 @@ class Event:
     message: str = ""
     values: tuple[tuple[str, str], ...] = ()
 
-    def document(self, event_id: int) -> dict[str, Any]:
-        """The event as the JSON API and the JSON log show it, under `event_id`."""
+    def document(self, event_id: int | None) -> dict[str, Any]:
+        """The event as the JSON API and the JSON log show it, under `event_id` (None: not stored)."""
         return {
             "id": event_id,
             "time": self.time,

@@ -98,7 +98,10 @@ def _time(text: str, name: str) -> float:
         seconds = float(text)
     except ValueError:
         try:
-            moment = datetime.datetime.fromisoformat(text.strip().replace("z", "Z"))
+            stripped = text.strip()
+            if stripped[-1:] in ("Z", "z"):  # Python 3.10's fromisoformat does not know Z
+                stripped = stripped[:-1] + "+00:00"
+            moment = datetime.datetime.fromisoformat(stripped)
         except ValueError:
             moment = None
         if moment is None or moment.tzinfo is None or "T" not in text.upper():

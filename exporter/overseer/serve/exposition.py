@@ -70,7 +70,7 @@ class FleetExposition:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
         `extra_collectors` (small ones, such as the event history's) are rendered by prometheus-client
-        after the fleet, as a registry holding the fleet's collector and then them renders them.
+        and appended after the fleet: what a registry with the fleet's collector first, then them, renders.
         """
         self._extra = CollectorRegistry(auto_describe=False)
         for collector in extra_collectors:
@@ -88,7 +88,7 @@ class FleetExposition:
     def render(self) -> bytes:
         """The exposition of the fleet now."""
         with self._lock:
-            return self._render(self._model.snapshot()) + generate_latest(self._extra)
+            return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> bytes:
         render = _RenderCache(NumericValues(self._value_keys))
@@ -148,6 +148,7 @@ class FleetExposition:
                 headers["ros_diagnostics_value"].encode(),
                 *values,
                 "".join(tail).encode(),
+                generate_latest(self._extra),  # joined here, not appended: no copy of the whole body
             ]
         )
 
