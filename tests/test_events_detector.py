@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from overseer.history.detector import TransitionDetector
 from overseer.history.events import Event
 from overseer.levels import Level
@@ -273,3 +278,26 @@ def test_the_model_without_a_listener_sends_nothing() -> None:
     fleet.advance(0.2)
     fleet.publish("robot1", (2, "/a", "bad"))
     assert fleet.take() == []
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.dictionaries(st.sampled_from(["/a", "/b", "/c"]), st.integers(0, 2), min_size=1),
+        min_size=1,
+        max_size=30,
+    )
+)
+def test_level_events_replay_to_the_models_levels_and_change_counts(arrays: list[dict[str, int]]) -> None:
+    fleet = Fleet()
+    for statuses in arrays:
+        fleet.advance(0.1)
+        fleet.publish("robot1", *((level, name, f"at {level}") for name, level in statuses.items()))
+    events = fleet.take()
+    robot = fleet.model.snapshot().robots[0]
+    for key, component in robot.components.items():
+        mine = [e for e in events if e.component == key[0]]
+        assert mine[0].kind == "appeared" and all(e.kind == "level" for e in mine[1:])
+        assert mine[-1].new_level is component.level and mine[-1].message == component.message
+        assert len(mine) - 1 == component.level_changes  # as ros_diagnostics_level_changes_total counts
+        assert all(a.new_level is b.old_level for a, b in itertools.pairwise(mine))
