@@ -19,6 +19,7 @@ BENCHMARKS = (
     "bench.bench_memory",
     "bench.bench_check",
     "bench.bench_robot_side",
+    "bench.bench_status_page",
     "bench.bench_events",
     "bench.bench_icinga2",
 )

@@ -15,6 +15,7 @@ import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+PAGE_SUFFIXES = {".html", ".js", ".css"}
 
 
 def dockerfile_copies() -> list[str]:
@@ -68,6 +69,12 @@ def wheel_from_dockerfile_sources(tmp_path: Path, env: dict[str, str] | None = N
         names = set(archive.namelist())
         entry_points = next(archive.read(n).decode() for n in names if n.endswith("entry_points.txt"))
     assert "overseer/serve/status_page/index.html" in names
+    page_files = {
+        p.name for p in (ROOT / "exporter/overseer/serve/status_page").iterdir() if p.suffix in PAGE_SUFFIXES
+    }
+    assert {"app.js", "style.css"} <= page_files
+    for page_file in page_files:  # every file the page loads is in the package
+        assert f"overseer/serve/status_page/{page_file}" in names, page_file
     assert "overseer/py.typed" in names
     assert re.search(r"^overseer = overseer\.cli:main$", entry_points, re.M)
     assert "overseer-0.1.0.data/scripts/check_ros_diagnostics" in names

@@ -22,7 +22,7 @@ import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import TYPE_CHECKING, Any
-from urllib.parse import unquote, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
 from prometheus_client.exposition import choose_encoder
 from prometheus_client.registry import CollectorRegistry
@@ -30,9 +30,16 @@ from prometheus_client.registry import CollectorRegistry
 from overseer.history.query import QueryError, parse_event_query
 from overseer.history.store import EventStore, EventsUnavailable
 from overseer.model import FleetModel
-from overseer.serve.api import robot_document, robots_document
+from overseer.serve.api import (
+    ComponentQueryError,
+    components_document,
+    parse_component_query,
+    robot_document,
+    robots_document,
+)
 from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
 if TYPE_CHECKING:
@@ -41,6 +48,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
+COMPONENTS_PATH = "/api/v1/components"
 EVENTS_PATH = "/api/v1/events"
 MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
@@ -78,6 +86,7 @@ class OverseerServer(ThreadingHTTPServer):
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
         self.status_page = resources.files("overseer.serve.status_page").joinpath("index.html").read_bytes()
+        self.page_files: dict[str, PageFile] = load_page_files()
         super().__init__(address, _Handler)
 
     @property
@@ -254,10 +263,19 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(200, robots_document(self.server.model.snapshot()), head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
+        elif path == COMPONENTS_PATH:
+            self._components(head_only)
+        elif path.startswith(STATIC_PREFIX) and path[len(STATIC_PREFIX) :] in self.server.page_files:
+            page_file = self.server.page_files[path[len(STATIC_PREFIX) :]]
+            self._send(
+                200, page_file.body, page_file.content_type, head_only, compressible=True, extra=PAGE_HEADERS
+            )
         elif path == EVENTS_PATH:
             self._events(urlsplit(self.path).query, head_only)
         elif path in ("/", "/index.html"):
-            self._send(200, self.server.status_page, "text/html; charset=utf-8", head_only)
+            self._send(
+                200, self.server.status_page, "text/html; charset=utf-8", head_only, extra=PAGE_HEADERS
+            )
         else:
             self._json(404, {"error": f"no such path {path!r}"}, head_only)
 
@@ -268,6 +286,14 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(404, {"error": f"unknown robot {name!r}"}, head_only)
         else:
             self._json(200, robot_document(snapshot, robot), head_only)
+
+    def _components(self, head_only: bool) -> None:
+        try:
+            query = parse_component_query(parse_qs(urlsplit(self.path).query))
+        except ComponentQueryError as error:
+            self._json(400, {"error": str(error)}, head_only)
+            return
+        self._json(200, components_document(self.server.model.snapshot(), query), head_only)
 
     def _events(self, query_string: str, head_only: bool) -> None:
         store = self.server.events

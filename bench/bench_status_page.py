@@ -1,0 +1,162 @@
+"""Status page: time to first render in a real headless Chromium, at 1,000 robots x 50 components.
+
+The exporter's model is filled through the real ingest (CDR payloads into `PayloadIngest`, as the DDS
+source hands them over), since one simulator process cannot publish 50,000 components on two cores; the
+real HTTP server serves it on loopback, and Debian's Chromium, driven by Playwright, loads the page.
+Time to first render is the page's own performance mark `overseer-first-render` (set once the first
+data is on screen), counted from navigation start; each figure is the median of several fresh loads.
+The 100-robot fleet gives the ratio that shows how the page scales.
+"""
+
+from __future__ import annotations
+
+import re
+import statistics
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+from playwright.sync_api import Browser
+from prometheus_client.registry import CollectorRegistry
+
+from bench.common import Row, emit
+from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
+from overseer.messages import DiagnosticArray
+from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.http import OverseerServer
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
+from overseer.sources.ingest import PayloadIngest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from support.browser import headless_chromium  # noqa: E402 - the test harness lives in tests/
+
+LEAVES = 50
+SITES = 10
+LOADS = 7
+TARGET_MS = 1000
+
+
+def fill(model: FleetModel, robots: int) -> None:
+    """`robots` robots of `LEAVES` leaves (plus group statuses) each, over `SITES` namespaces."""
+    leaves = leaf_components(LEAVES)
+    for index in range(robots):
+        levels = initial_levels(leaves, index % 3, index % 2)
+        array = DiagnosticArray(0, 0, "", tuple(aggregated_statuses(leaves, levels, set())))
+        name = f"site{index % SITES}/robot{index}"
+        ingest = PayloadIngest(model, name, "dds", f"rt/{name}/diagnostics_agg", WIRE_FORMAT)
+        ingest(encode_diagnostic_array(array))
+
+
+def first_render_ms(browser: Browser, url: str, view: str) -> float:
+    """Median time from navigation start to the page's first render, over `LOADS` fresh loads."""
+    timings = []
+    for _ in range(LOADS):
+        context = browser.new_context(viewport={"width": 1280, "height": 900})
+        page = context.new_page()
+        page.goto(url)
+        page.wait_for_selector(f"body[data-view={view}]", timeout=60_000)
+        timings.append(
+            float(page.evaluate("performance.getEntriesByName('overseer-first-render')[0].startTime"))
+        )
+        context.close()
+    return statistics.median(timings)
+
+
+def get_ms(url: str, repeats: int = 7) -> tuple[float, int]:
+    """Median latency of GET `url`, and its body size."""
+    timings, size = [], 0
+    for _ in range(repeats):
+        started = time.perf_counter()
+        with urllib.request.urlopen(url, timeout=60) as response:
+            size = len(response.read())
+        timings.append((time.perf_counter() - started) * 1000)
+    return statistics.median(timings), size
+
+
+def measure(browser: Browser, robots: int) -> dict[str, float]:
+    """Figures of one fleet size: page first renders, and the JSON the page reads."""
+    model = FleetModel(FleetLimits(max_robots=100_000, stale_after=3600, robot_timeout=3600))
+    fill(model, robots)
+    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    server = OverseerServer(("127.0.0.1", 0), model, CollectorRegistry(), exposition)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        figures = {
+            "fleet": first_render_ms(browser, server.url + "/", "fleet"),
+            "filtered": first_render_ms(
+                browser, server.url + "/?level=ERROR,WARN&q=laser&sort=level", "fleet"
+            ),
+            "robot": first_render_ms(browser, server.url + "/?robot=site1%2Frobot1", "robot"),
+        }
+        figures["robots_ms"], figures["robots_bytes"] = get_ms(server.url + "/api/v1/robots")
+        figures["search_ms"], figures["search_bytes"] = get_ms(
+            server.url + "/api/v1/components?q=no%20scans&limit=200"
+        )
+        return figures
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def main() -> None:
+    """Measure at 100 and 1,000 robots of 50 components."""
+    with headless_chromium() as browser:
+        small = measure(browser, 100)
+        large = measure(browser, 1000)
+    label = f"1000 robots x {LEAVES} components"
+    rows = [
+        Row(
+            "status page",
+            f"{label}: fleet view, first render",
+            large["fleet"],
+            "ms",
+            f"<= {TARGET_MS}",
+            large["fleet"] <= TARGET_MS,
+        ),
+        Row(
+            "status page",
+            f"{label}: filtered fleet view (level, search, sort), first render",
+            large["filtered"],
+            "ms",
+            f"<= {TARGET_MS}",
+            large["filtered"] <= TARGET_MS,
+        ),
+        Row(
+            "status page",
+            f"{label}: robot view, first render",
+            large["robot"],
+            "ms",
+            f"<= {TARGET_MS}",
+            large["robot"] <= TARGET_MS,
+        ),
+        Row(
+            "status page", f"100 robots x {LEAVES} components: fleet view, first render", small["fleet"], "ms"
+        ),
+        Row(
+            "status page", "fleet view first render, 1000 / 100 robots", large["fleet"] / small["fleet"], "x"
+        ),
+        Row("status page", f"{label}: GET /api/v1/robots", large["robots_ms"], "ms"),
+        Row("status page", f"{label}: /api/v1/robots size", large["robots_bytes"] / 1e3, "kB"),
+        Row(
+            "status page",
+            f"{label}: GET /api/v1/components search (50k components)",
+            large["search_ms"],
+            "ms",
+        ),
+        Row(
+            "status page",
+            f"{label}: /api/v1/components answer size (limit 200)",
+            large["search_bytes"] / 1e3,
+            "kB",
+        ),
+    ]
+    emit(rows)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+// The status page: reads the view from the URL, fetches what it needs from the exporter, renders, and
+// refreshes every few seconds keeping the filter, the scroll position and the open folders.
+
+import {agoText, badge, element, getJson, timeText} from "./dom.js";
+import {renderMatches, renderRobots, renderSummary} from "./fleet.js";
+import {fleetQuery, pageHref, readQuery, robotQuery} from "./location.js";
+import {Timeline} from "./timeline.js";
+import {buildTree, renderTree} from "./tree.js";
+
+const REFRESH_MS = 2000;
+const MATCH_LIMIT = 200;
+const SEARCH_DELAY_MS = 250;
+
+const openGroups = new Map();  // fleet groups the user opened or closed, by namespace
+const openFolders = new Map();  // robot name → its folders the user opened or closed, by path
+let view = readQuery(location.search);
+let timeline = null;
+let timer = null;
+let generation = 0;  // a render started for an older view is dropped
+let rendered = false;
+
+function setView(next, how) {
+  view = next;
+  const query = view.robot !== null ? robotQuery(view.robot, view.component) : fleetQuery(view);
+  if (how === "push") history.pushState(null, "", pageHref(query));
+  else if (how === "replace") history.replaceState(null, "", pageHref(query));
+  refresh();
+}
+
+function openRobot(name) {
+  setView({...view, robot: name, component: null}, "push");
+  window.scrollTo(0, 0);
+}
+
+function toggleLevel(state) {
+  const levels = new Set(view.levels);
+  if (levels.has(state)) levels.delete(state); else levels.add(state);
+  setView({...view, robot: null, levels}, view.robot === null ? "replace" : "push");
+}
+
+function showError(message) {
+  document.getElementById("error").textContent = message;
+}
+
+async function renderFleet(current) {
+  const filtered = current.levels.size > 0 || current.q !== "";
+  const matchQuery = new URLSearchParams({limit: String(MATCH_LIMIT)});
+  if (current.levels.size) matchQuery.set("level", [...current.levels].join(","));
+  if (current.q) matchQuery.set("q", current.q);
+  const [robots, matches] = await Promise.all([
+    getJson("api/v1/robots"),
+    filtered ? getJson(`api/v1/components?${matchQuery}`) : Promise.resolve(null),
+  ]);
+  if (current !== view) return false;
+  const matched = new Set(current.q && matches ? matches.robots.map((r) => r.robot) : []);
+  renderSummary(robots, current, toggleLevel);
+  renderRobots(robots, current, matched, openGroups, openRobot);
+  renderMatches(matches, current, openRobot);
+  document.getElementById("fleet-view").hidden = false;
+  document.getElementById("robot-view").hidden = true;
+  return true;
+}
+
+function showHistoryOf(component) {
+  setView({...view, component}, "push");
+}
+
+async function renderRobot(current) {
+  if (timeline === null || timeline.robot !== current.robot || timeline.component !== current.component) {
+    timeline = new Timeline(current.robot, current.component);
+  }
+  const path = `api/v1/robots/${current.robot.split("/").map(encodeURIComponent).join("/")}`;
+  // the fleet's counts at the top come when they come: the robot's own view does not wait for them
+  getJson("api/v1/robots").then((robots) => {
+    if (current === view) renderSummary(robots, {...current, levels: new Set()}, toggleLevel);
+  }, () => {});
+  const [robot] = await Promise.all([
+    getJson(path).catch((error) => (error.status === 404 ? null : Promise.reject(error))),
+    timeline.refresh().catch((error) => timeline.fail(error)),
+  ]);
+  if (current !== view) return false;
+  document.getElementById("back").href = pageHref(fleetQuery(current));
+  const title = document.getElementById("robot-title");
+  const tree = document.getElementById("tree");
+  if (robot === null) {
+    title.replaceChildren(`${current.robot}: unknown robot`);
+    document.getElementById("robot-facts").textContent = "The exporter does not know this robot (yet).";
+    tree.replaceChildren();
+  } else {
+    title.replaceChildren(badge(robot.up ? robot.state : "STALE"), " ",
+      element("span", {class: "node-name"}, robot.robot), `: ${robot.up ? robot.state : "DOWN"}`);
+    const c = robot.counts;
+    document.getElementById("robot-facts").textContent =
+      `${robot.transport} · last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})`
+      + ` · ${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`;
+    const folders = folderMemory(current.robot);
+    renderTree(tree, buildTree(robot.components), robot.generated_at, folders, showHistoryOf);
+  }
+  const narrowed = document.getElementById("timeline-component");
+  narrowed.hidden = current.component === null;
+  narrowed.replaceChildren(`only ${current.component ?? ""} · `, allHistoryLink(current.robot));
+  timeline.render();
+  document.getElementById("fleet-view").hidden = true;
+  document.getElementById("robot-view").hidden = false;
+  document.title = `${current.robot} — Overseer`;
+  return true;
+}
+
+function allHistoryLink(robot) {
+  const link = element("a", {href: pageHref(robotQuery(robot)), id: "timeline-all"}, "every component");
+  link.addEventListener("click", (event) => {
+    if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+    event.preventDefault();
+    setView({...view, component: null}, "push");
+  });
+  return link;
+}
+
+function folderMemory(robot) {
+  if (!openFolders.has(robot)) openFolders.set(robot, new Map());
+  return openFolders.get(robot);
+}
+
+async function refresh() {
+  clearTimeout(timer);
+  const mine = ++generation;
+  const current = view;
+  try {
+    const done = current.robot !== null ? await renderRobot(current) : await renderFleet(current);
+    if (done && mine === generation) {
+      showError("");
+      if (current.robot === null) document.title = "Overseer — fleet status";
+      if (!rendered) {
+        rendered = true;
+        performance.mark("overseer-first-render");
+      }
+      document.body.dataset.view = current.robot !== null ? "robot" : "fleet";
+      document.body.dataset.refreshes = String(Number(document.body.dataset.refreshes || 0) + 1);
+    }
+  } catch (error) {
+    if (mine === generation) showError(`cannot reach the exporter: ${error.message}`);
+  }
+  if (mine === generation) timer = setTimeout(refresh, REFRESH_MS);
+}
+
+function setUpControls() {
+  const search = document.getElementById("search");
+  const sort = document.getElementById("sort");
+  search.value = view.q;
+  sort.value = view.sort;
+  let typing = null;
+  search.addEventListener("input", () => {
+    clearTimeout(typing);
+    typing = setTimeout(() => setView({...view, robot: null, q: search.value.trim()}, "replace"), SEARCH_DELAY_MS);
+  });
+  document.getElementById("controls").addEventListener("submit", (event) => {
+    event.preventDefault();
+    clearTimeout(typing);
+    setView({...view, robot: null, q: search.value.trim()}, "replace");
+  });
+  sort.addEventListener("change", () => setView({...view, robot: null, sort: sort.value}, "replace"));
+  for (const id of ["clear", "home", "back"]) {
+    document.getElementById(id).addEventListener("click", (event) => {
+      if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+      event.preventDefault();
+      const next = id === "back" ? {...readQuery(new URL(event.currentTarget.href).search), robot: null}
+                                 : readQuery("");
+      search.value = next.q;
+      sort.value = next.sort;
+      setView(next, "push");
+    });
+  }
+  window.addEventListener("popstate", () => {
+    view = readQuery(location.search);
+    search.value = view.q;
+    sort.value = view.sort;
+    refresh();
+  });
+}
+
+// Links of the first page (`/#robot`) still open that robot, under the new deep link.
+if (location.hash.length > 1 && view.robot === null) {
+  view = {...view, robot: decodeURIComponent(location.hash.slice(1))};
+  history.replaceState(null, "", pageHref(robotQuery(view.robot)));
+}
+setUpControls();
+refresh();

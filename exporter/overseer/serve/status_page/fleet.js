@@ -1,0 +1,136 @@
+// The fleet view: counts per level, robots grouped by namespace prefix, filtered, searched and sorted,
+// and the components across the fleet that match the filter (found by the exporter, bounded).
+
+import {STATES, agoText, badge, element, rank, worstState} from "./dom.js";
+import {pageHref, robotQuery} from "./location.js";
+
+const collator = new Intl.Collator(undefined, {numeric: true});
+const NO_NAMESPACE = "";
+
+/** The group a robot belongs to: the first segment of a namespaced name ("site2/robot7" → "site2"). */
+export function namespaceOf(name) {
+  const slash = name.indexOf("/");
+  return slash > 0 ? name.slice(0, slash) : NO_NAMESPACE;
+}
+
+const COMPARE = {
+  name: (a, b) => collator.compare(a.robot, b.robot),
+  level: (a, b) => rank(b.state) - rank(a.state) || collator.compare(a.robot, b.robot),
+  errors: (a, b) => b.counts.error - a.counts.error || b.counts.warn - a.counts.warn
+    || collator.compare(a.robot, b.robot),
+  last_message: (a, b) => (a.last_message ?? -Infinity) - (b.last_message ?? -Infinity)
+    || collator.compare(a.robot, b.robot),
+};
+
+/** The robots `view` shows, sorted: level filter on the robot's level, text on its name or components. */
+export function visibleRobots(robots, view, matchedRobots) {
+  const needle = view.q.toLowerCase();
+  const shown = robots.filter((robot) =>
+    (!view.levels.size || view.levels.has(robot.state))
+    && (!needle || robot.robot.toLowerCase().includes(needle) || matchedRobots.has(robot.robot)));
+  return shown.sort(COMPARE[view.sort] || COMPARE.name);
+}
+
+/** Groups of robots by namespace, in the order of their first robot in `robots`. */
+export function groupRobots(robots) {
+  const groups = new Map();
+  for (const robot of robots) {
+    const name = namespaceOf(robot.robot);
+    if (!groups.has(name)) groups.set(name, []);
+    groups.get(name).push(robot);
+  }
+  return groups;
+}
+
+/** The counts per level at the top; each level is a toggle of the level filter. */
+export function renderSummary(robotsDocument, view, onToggleLevel) {
+  const robots = robotsDocument.robots;
+  const totals = Object.fromEntries(STATES.map((s) => [s, 0]));
+  const components = Object.fromEntries(STATES.map((s) => [s, 0]));
+  let down = 0;
+  for (const robot of robots) {
+    totals[robot.state] += 1;
+    if (!robot.up) down += 1;
+    for (const state of STATES) components[state] += robot.counts[state.toLowerCase()];
+  }
+  const chips = STATES.map((state) => {
+    const chip = element("button", {type: "button", class: `chip ${state}`, "data-level": state,
+                                    "aria-pressed": String(view.levels.has(state)),
+                                    title: `${components[state]} components ${state}`},
+      `${state} `, element("b", {"data-total": state}, String(totals[state])));
+    chip.addEventListener("click", () => onToggleLevel(state));
+    return chip;
+  });
+  const componentTotal = STATES.reduce((sum, s) => sum + components[s], 0);
+  document.getElementById("summary").replaceChildren(...chips,
+    element("span", {class: "fact", "data-total": "robots"}, `${robots.length} robots`),
+    element("span", {class: "fact", "data-total": "down"}, `down ${down}`),
+    element("span", {class: "fact", "data-total": "components"},
+      `${componentTotal} components: ${STATES.map((s) => `${components[s]} ${s}`).join(", ")}`));
+}
+
+/** The robots, grouped, as the filter and sort of `view` ask; `openGroups` keeps the user's choices. */
+export function renderRobots(robotsDocument, view, matchedRobots, openGroups, onOpenRobot) {
+  const now = robotsDocument.generated_at;
+  const shown = visibleRobots(robotsDocument.robots, view, matchedRobots);
+  document.getElementById("showing").textContent =
+    `Showing ${shown.length} of ${robotsDocument.robots.length} robots`;
+  const sections = [];
+  for (const [name, robots] of groupRobots(shown)) {
+    const worst = worstState(robots.map((r) => r.state));
+    const perState = STATES.map((s) => [s, robots.filter((r) => r.state === s).length]).filter(([, n]) => n);
+    const details = element("details", {class: "group", "data-group": name, open: openGroups.get(name) ?? true},
+      element("summary", {},
+        badge(worst), " ",
+        element("span", {class: "group-name"}, name === NO_NAMESPACE ? "(no namespace)" : `${name}/`),
+        element("small", {}, `${robots.length} robots: ${perState.map(([s, n]) => `${n} ${s}`).join(", ")}`)),
+      element("table", {class: "robots"},
+        element("thead", {}, element("tr", {}, ...["Level", "Robot", "Components", "Last message"]
+          .map((h) => element("th", {}, h)))),
+        element("tbody", {}, ...robots.map((robot) => robotRow(robot, now, onOpenRobot)))));
+    details.firstChild.addEventListener("click", () => openGroups.set(name, !details.open));
+    sections.push(details);
+  }
+  document.getElementById("groups").replaceChildren(...sections);
+}
+
+function robotRow(robot, now, onOpenRobot) {
+  const c = robot.counts;
+  return element("tr", {"data-robot": robot.robot, "data-state": robot.state, class: robot.up ? null : "down"},
+    element("td", {}, badge(robot.state)),
+    element("td", {class: "robot-name"}, robotLink(robot.robot, onOpenRobot)),
+    element("td", {}, `${c.error} error · ${c.warn} warn · ${c.stale} stale · ${c.ok} ok`),
+    element("td", {}, robot.up ? agoText(robot.last_message, now) : `down, last ${agoText(robot.last_message, now)}`));
+}
+
+/** A link to a robot's view that navigates in place (a new tab still works: it is a real link). */
+export function robotLink(name, onOpenRobot) {
+  const link = element("a", {href: pageHref(robotQuery(name))}, name);
+  link.addEventListener("click", (event) => {
+    if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+    event.preventDefault();
+    onOpenRobot(name);
+  });
+  return link;
+}
+
+/** The components matching the filter across the fleet, as the exporter found them (worst first). */
+export function renderMatches(matches, view, onOpenRobot) {
+  const section = document.getElementById("matches");
+  section.hidden = matches === null;
+  if (matches === null) return;
+  const rows = matches.components.slice();
+  if (view.sort === "name") {
+    rows.sort((a, b) => collator.compare(a.robot, b.robot) || collator.compare(a.name, b.name));
+  }
+  document.getElementById("matches-count").textContent = matches.truncated
+    ? `${matches.total} components match; the ${rows.length} worst are shown`
+    : `${matches.total} components match`;
+  document.getElementById("matches-rows").replaceChildren(...rows.map((c) =>
+    element("tr", {"data-robot": c.robot, "data-component": c.name, "data-state": c.state},
+      element("td", {}, badge(c.state)),
+      element("td", {}, robotLink(c.robot, onOpenRobot)),
+      element("td", {}, c.name),
+      element("td", {}, c.hardware_id),
+      element("td", {}, c.message))));
+}
