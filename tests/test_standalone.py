@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fnmatch
 import re
 import subprocess
 from pathlib import Path
@@ -10,21 +11,27 @@ REPO = Path(__file__).resolve().parent.parent
 # A sibling of the checkout, or a directory of some build machine or user account.
 OUTSIDE = re.compile(r"\.\./shared\b|(?<![\w.])/(?:work|root|home|Users)/[\w.-]+")
 ALLOWED = {"tests/test_standalone.py"}
-# What a checkout grows that is not the project's: CI runs on a copy without .git, so it walks the tree.
-GENERATED = {".git", ".venv", ".mypy_cache", ".pytest_cache", ".ruff_cache", "__pycache__", "build"}
 
 
-def tracked_files() -> list[str]:
-    """Every file of the project: what git tracks, or in a copy without git, every file not generated."""
-    if (REPO / ".git").exists():
-        listing = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True)
+def ignored_patterns(root: Path) -> list[str]:
+    """The .gitignore's patterns (names and globs, a trailing / for folders), and git's own folder."""
+    lines = (root / ".gitignore").read_text(encoding="utf-8").splitlines()
+    return [".git", *(line.strip().rstrip("/") for line in lines if line.strip() and line[0] != "#")]
+
+
+def tracked_files(root: Path = REPO) -> list[str]:
+    """Every file of the project: what git tracks, or in a copy without git (CI), every file not ignored."""
+    if (root / ".git").exists():
+        listing = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True)
         return [name for name in listing.stdout.decode().split("\0") if name]
+    patterns = ignored_patterns(root)
     return [
-        str(path.relative_to(REPO))
-        for path in REPO.rglob("*")
+        str(path.relative_to(root))
+        for path in root.rglob("*")
         if path.is_file()
-        and not GENERATED.intersection(path.relative_to(REPO).parts)
-        and not any(part.endswith(".egg-info") for part in path.parts)
+        and not any(
+            fnmatch.fnmatch(part, pattern) for part in path.relative_to(root).parts for pattern in patterns
+        )
     ]
 
 
@@ -44,3 +51,11 @@ def test_the_pattern_catches_what_it_is_for() -> None:
     assert OUTSIDE.search("the venv is /work/main/.venv")
     assert OUTSIDE.search("cd /root/project")
     assert not OUTSIDE.search("ln -s /usr/lib/nagios/plugins/ and /etc/icinga2/conf.d")
+
+
+def test_a_copy_without_git_skips_what_the_build_leaves(tmp_path: Path) -> None:
+    (tmp_path / ".gitignore").write_text("*.so\n.venv/\n", encoding="utf-8")
+    for name in ("kept.py", "built.so", ".venv/bin/python", "pkg/kept.txt"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("", encoding="utf-8")
+    assert sorted(tracked_files(tmp_path)) == [".gitignore", "kept.py", "pkg/kept.txt"]
