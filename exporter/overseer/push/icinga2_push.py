@@ -297,20 +297,13 @@ class Icinga2Push:
         return {"overseer_managed": True, "overseer_exporter": self._config.exporter_id, "dummy_state": 3}
 
     def _host_attrs(self, host: str) -> dict[str, Any]:
-        variables = {**self._marks(), "ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT}
-        return self._with_zone(
-            {
-                "check_command": "dummy",
-                "enable_active_checks": True,
-                "enable_passive_checks": True,
-                "check_interval": FALLBACK_CHECK_INTERVAL,
-                "retry_interval": FALLBACK_CHECK_INTERVAL,
-                "max_check_attempts": 1,
-                "vars": variables,
-            }
-        )
+        return self._passive_attrs({"ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT})
 
     def _service_attrs(self) -> dict[str, Any]:
+        return self._passive_attrs({"dummy_text": SILENT_TEXT})
+
+    def _passive_attrs(self, variables: dict[str, Any]) -> dict[str, Any]:
+        """Pushed results only; when they stop for their TTL, `dummy` runs and says the exporter is silent."""
         return self._with_zone(
             {
                 "check_command": "dummy",
@@ -319,7 +312,7 @@ class Icinga2Push:
                 "check_interval": FALLBACK_CHECK_INTERVAL,
                 "retry_interval": FALLBACK_CHECK_INTERVAL,
                 "max_check_attempts": 1,
-                "vars": {**self._marks(), "dummy_text": SILENT_TEXT},
+                "vars": {**self._marks(), **variables},
             }
         )
 
