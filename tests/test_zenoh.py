@@ -89,19 +89,21 @@ def test_rmw_zenoh_robots_are_heard_with_their_levels_and_nested_namespaces(tmp_
         assert metric(exporter, "overseer_source_errors_total", reason="type_hash_mismatch") is None
 
 
-def test_robots_behind_zenoh_bridge_ros2dds_are_heard(tmp_path: Path) -> None:
+def test_robots_behind_zenoh_bridge_ros2dds_are_heard_and_down_when_their_bridge_goes(tmp_path: Path) -> None:
+    port = free_port()
+    bridged = simulator_args(port, "--zenoh.bridge-keys", "--robots=1", "--namespace-prefix=fleet/amr")
     with (
-        running_router(tmp_path) as port,
-        running_exporter(tmp_path, None, *exporter_args(port)) as exporter,
-        running_simulator(
-            tmp_path,
-            0,
-            *simulator_args(port, "--zenoh.bridge-keys", "--robots=1", "--namespace-prefix=fleet/amr"),
-        ),
+        running_router(tmp_path, port),
+        running_exporter(tmp_path, None, *exporter_args(port, "--fleet.robot-timeout=60s")) as exporter,
+        running_simulator(tmp_path, 0, *bridged) as bridge,
     ):
         document = wait_until_heard(exporter, "fleet/amr1", 15)
         assert document["level"] == LEVELS["ERROR"] and document["transport"] == "zenoh"
         assert robot_up(exporter, "fleet/amr1") == 1.0
+        bridge.process.send_signal(signal.SIGKILL)
+        wait_for(
+            lambda: robot_up(exporter, "fleet/amr1") == 0.0, 5, interval=0.1, message="bridged robot down"
+        )
 
 
 def test_a_router_that_comes_up_later_is_joined_without_a_restart(tmp_path: Path) -> None:

@@ -16,7 +16,9 @@ from overseer.sources.zenoh_keys import (
     DiagnosticsKey,
     RejectedKey,
     bridge_key,
+    bridge_publisher_token,
     data_key,
+    parse_bridge_token,
     parse_data_key,
     parse_publisher_token,
     publisher_token,
@@ -87,6 +89,22 @@ def test_publisher_tokens_name_the_robot_and_other_tokens_are_ignored() -> None:
     assert parse_publisher_token(unnamespaced, 0) == DiagnosticsKey(
         "", "diagnostics", RMW_ZENOH, DIAGNOSTIC_ARRAY_HASH
     )
+
+
+def test_bridge_tokens_name_the_robot_and_other_tokens_are_ignored() -> None:
+    token = bridge_publisher_token("f00d", "site_a/robot7", "diagnostics_agg")
+    assert (
+        token
+        == "@/f00d/@ros2_lv/MP/site_a§robot7§diagnostics_agg/diagnostic_msgs§msg§DiagnosticArray/:1:0:0,10"
+    )
+    assert parse_bridge_token(token) == DiagnosticsKey("site_a/robot7", "diagnostics_agg", BRIDGE, "")
+    assert parse_bridge_token(bridge_publisher_token("f00d", "", "diagnostics")) == DiagnosticsKey(
+        "", "diagnostics", BRIDGE, ""
+    )
+    assert parse_bridge_token(token.replace("DiagnosticArray", "String")) is None
+    assert parse_bridge_token(token.replace("/MP/", "/MS/")) is None
+    assert parse_bridge_token(token.replace("site_a§", "9§")) is None
+    assert parse_bridge_token(token + "/x") is None
 
 
 def test_zenoh_section_turns_the_transport_on_with_its_keys(tmp_path: Path) -> None:

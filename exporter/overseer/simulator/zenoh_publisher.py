@@ -3,8 +3,9 @@
 As rmw_zenoh (ROS 2 Jazzy): `<domain>/<ns>/diagnostics_agg/diagnostic_msgs::msg::dds_::DiagnosticArray_/
 RIHS01_…`, with the attachment rmw_zenoh sends (sequence number, source timestamp, source GID, in
 zenoh-ext serialization) and the liveliness tokens of the node and of the publisher. As
-zenoh-bridge-ros2dds: `<ns>/diagnostics_agg`, no attachment, no token. The payload is the same CDR
-sample the DDS simulator writes; the fleet's design, events and timing are shared with it.
+zenoh-bridge-ros2dds: `<ns>/diagnostics_agg`, no attachment, and the bridge's token for the route.
+The payload is the same CDR sample the DDS simulator writes; the fleet's design, events and timing
+are shared with it.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from overseer.simulator.publisher import FleetSimulator, SimulatedRobot, Simulat
 from overseer.sources.zenoh_keys import (
     DIAGNOSTIC_ARRAY_HASH,
     bridge_key,
+    bridge_publisher_token,
     data_key,
     node_token,
     publisher_token,
@@ -141,8 +143,12 @@ class ZenohFleetSimulator(FleetSimulator):
             return
         publisher = self._session.declare_publisher(self.robot_key(robot))
         writer = _Writer(publisher)
-        if not self.zenoh_settings.bridge_keys:
-            namespace = "" if self.settings.separate_domains else robot.name
+        namespace = "" if self.settings.separate_domains else robot.name
+        liveliness = self._session.liveliness()
+        if self.zenoh_settings.bridge_keys:
+            token = bridge_publisher_token(self._zid, namespace, self.settings.topic)
+            writer.tokens.append(liveliness.declare_token(token))
+        else:
             self._entities += 1
             token = publisher_token(
                 robot.domain,
@@ -153,7 +159,6 @@ class ZenohFleetSimulator(FleetSimulator):
                 self.settings.topic,
                 self.zenoh_settings.type_hash,
             )
-            liveliness = self._session.liveliness()
             writer.tokens.append(
                 liveliness.declare_token(node_token(robot.domain, self._zid, namespace, NODE_NAME))
             )

@@ -4,7 +4,8 @@ One Zenoh session (a client of the configured routers by default) subscribes to 
 diagnostics keys with wildcards, so robots that start later, or were built against another revision of
 the message (another type hash), are heard with no restart. Payloads are DDS CDR and go through the
 same ingest as DDS samples. rmw_zenoh's liveliness tokens tell when a robot's diagnostics publisher
-goes (process killed, link lost): the robot is down at once, not after `robot_timeout`.
+goes (process killed, link lost), and so do zenoh-bridge-ros2dds's tokens for the routes it serves:
+the robot is down at once, not after `robot_timeout`.
 """
 
 from __future__ import annotations
@@ -21,12 +22,15 @@ from overseer.model.shard import Shard
 from overseer.sources.ingest import PayloadIngest
 from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh_keys import (
+    BRIDGE,
     DIAGNOSTIC_ARRAY_HASH,
     RMW_ZENOH,
     DiagnosticsKey,
     RejectedKey,
+    bridge_liveliness_subscription,
     data_subscriptions,
     liveliness_subscription,
+    parse_bridge_token,
     parse_data_key,
     parse_publisher_token,
 )
@@ -95,9 +99,10 @@ class ZenohSource:
             domain, formats = self._config.domain, self._config.key_formats
             for key in data_subscriptions(domain, formats):
                 self._declared.append(session.declare_subscriber(key, self._on_data))
-            if RMW_ZENOH in formats:
-                liveliness = session.liveliness()
-                key = liveliness_subscription(domain)
+            liveliness = session.liveliness()
+            tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
+            tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
+            for key in tokens:
                 self._declared.append(liveliness.declare_subscriber(key, self._on_token, history=True))
         log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
         while not self._stop.wait(PRUNE_INTERVAL_SECONDS):
@@ -159,7 +164,7 @@ class ZenohSource:
     def _on_token(self, sample: zenoh.Sample) -> None:
         try:
             key = str(sample.key_expr)
-            parsed = parse_publisher_token(key, self._config.domain)
+            parsed = parse_publisher_token(key, self._config.domain) or parse_bridge_token(key)
             if parsed is None:
                 return
             robot = parsed.namespace or self._config.unnamespaced_robot

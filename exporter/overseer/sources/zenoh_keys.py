@@ -4,7 +4,9 @@ rmw_zenoh (ROS 2 Jazzy, `rmw_zenoh_cpp`) publishes topic `/<ns>/diagnostics_agg`
 `<domain>/<ns>/diagnostics_agg/<DDS type name>/<type hash>` and declares, for each publisher, a liveliness
 token `@ros2_lv/<domain>/<zid>/<nid>/<id>/MP/<enclave>/<ns>/<node>/<topic>/<type>/<hash>/<qos>` in which
 every name has its `/` written as `%`. zenoh-bridge-ros2dds routes DDS topic `/<ns>/diagnostics_agg` as
-key `<ns>/diagnostics_agg`, with no type and no hash. Both carry the DDS CDR sample with its header.
+key `<ns>/diagnostics_agg`, with no type and no hash, and declares, while a node on the robot publishes
+it, the token `@/<bridge zid>/@ros2_lv/MP/<ns>§diagnostics_agg/diagnostic_msgs§msg§DiagnosticArray/<qos>`.
+Both carry the DDS CDR sample with its encapsulation header.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs::msg::dds_::DiagnosticArray_"
 DIAGNOSTIC_ARRAY_HASH = "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
 LIVELINESS_SPACE = "@ros2_lv"
 PUBLISHER_ENTITY = "MP"
+BRIDGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+_BRIDGE_SLASH = "\u00a7"  # the bridge writes `/` as `§` inside a token's chunks
 RMW_ZENOH = "rmw_zenoh"
 BRIDGE = "bridge"
 KEY_FORMATS = (RMW_ZENOH, BRIDGE)
@@ -63,6 +67,11 @@ def liveliness_subscription(domain: int) -> str:
     return f"{LIVELINESS_SPACE}/{domain}/*/*/*/{PUBLISHER_ENTITY}/*/*/*/$*diagnostics$*/**"
 
 
+def bridge_liveliness_subscription() -> str:
+    """The key expression of the tokens zenoh-bridge-ros2dds declares for routed diagnostics publishers."""
+    return f"@/*/{LIVELINESS_SPACE}/{PUBLISHER_ENTITY}/$*diagnostics$*/**"
+
+
 def parse_data_key(key: str, domain: int) -> DiagnosticsKey:
     """Recognise a data key of either format; RejectedKey (with the reason to count) otherwise."""
     chunks = key.split("/")
@@ -93,6 +102,33 @@ def parse_publisher_token(key: str, domain: int) -> DiagnosticsKey | None:
         return DiagnosticsKey(_namespace(topic[:-1]), topic[-1], RMW_ZENOH, chunks[11])
     except RejectedKey:
         return None
+
+
+def parse_bridge_token(key: str) -> DiagnosticsKey | None:
+    """The diagnostics topic a bridge's publisher token announces; None for any other token."""
+    chunks = key.split("/")
+    if (
+        len(chunks) != 7
+        or chunks[0] != "@"
+        or chunks[2] != LIVELINESS_SPACE
+        or chunks[3] != PUBLISHER_ENTITY
+        or chunks[5].replace(_BRIDGE_SLASH, "/") != BRIDGE_TYPE
+    ):
+        return None
+    topic = chunks[4].replace(_BRIDGE_SLASH, "/").split("/")
+    if topic[-1] not in _KINDS:
+        return None
+    try:
+        return DiagnosticsKey(_namespace(topic[:-1]), topic[-1], BRIDGE, "")
+    except RejectedKey:
+        return None
+
+
+def bridge_publisher_token(zid: str, namespace: str, kind: str) -> str:
+    """The token zenoh-bridge-ros2dds declares while it routes `/<namespace>/<kind>` (reliable, depth 10)."""
+    topic = bridge_key(namespace, kind).replace("/", _BRIDGE_SLASH)
+    typ = BRIDGE_TYPE.replace("/", _BRIDGE_SLASH)
+    return f"@/{zid}/{LIVELINESS_SPACE}/{PUBLISHER_ENTITY}/{topic}/{typ}/:1:0:0,10"
 
 
 def data_key(domain: int, namespace: str, kind: str, type_hash: str = DIAGNOSTIC_ARRAY_HASH) -> str:
