@@ -54,6 +54,17 @@ def running_router(tmp_path: Path, port: int | None = None) -> Iterator[int]:
 
 
 @contextmanager
+def running_router_process(tmp_path: Path) -> Iterator[tuple[int, RunningProcess]]:
+    """A router on a free loopback port for the block; yields its port and its process (for its CPU)."""
+    port = free_port()
+    router = start_router(tmp_path, port)
+    try:
+        yield port, router
+    finally:
+        router.stop()
+
+
+@contextmanager
 def client_session(port: int) -> Iterator[zenoh.Session]:
     """A Zenoh client session of the router on `port`, in this process, for publishing hand-made keys."""
     config = zenoh.Config()
