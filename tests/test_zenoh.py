@@ -128,30 +128,28 @@ def test_a_router_that_comes_up_later_is_joined_without_a_restart(tmp_path: Path
 
 
 def test_a_killed_robot_is_down_at_once_through_liveliness_and_up_when_it_returns(tmp_path: Path) -> None:
+    victim_args = simulator_args(port := free_port(), "--robots=1", "--namespace-prefix=victim")
     with (
-        running_router(tmp_path) as port,
-        running_exporter(tmp_path, None, *exporter_args(port, "--fleet.robot-timeout=60s")) as exporter,
+        running_router(tmp_path, port),
+        # The robots start first: their tokens reach the exporter as liveliness history.
         running_simulator(tmp_path, 0, *simulator_args(port, "--robots=1", "--namespace-prefix=keeper")),
+        running_simulator(tmp_path, 0, *victim_args) as victim,
     ):
-        with running_simulator(
-            tmp_path, 0, *simulator_args(port, "--robots=1", "--namespace-prefix=victim")
-        ) as victim:
+        time.sleep(1)
+        with running_exporter(tmp_path, None, *exporter_args(port, "--fleet.robot-timeout=60s")) as exporter:
             wait_until_heard(exporter, "victim1", 15)
             wait_until_heard(exporter, "keeper1", 15)
             victim.process.send_signal(signal.SIGKILL)
             killed_at = time.monotonic()
             wait_for(lambda: robot_up(exporter, "victim1") == 0.0, 10, interval=0.1, message="victim1 down")
             down_after = time.monotonic() - killed_at
-            victim.process.wait()
-        assert down_after < 5, f"down after {down_after:.1f}s; the robot timeout is 60s"
-        document = exporter.robot("victim1")
-        assert document is not None and document["up"] is False and document["level"] == LEVELS["STALE"]
-        assert robot_up(exporter, "keeper1") == 1.0
-        with running_simulator(tmp_path, 0, *simulator_args(port, "--robots=1", "--namespace-prefix=victim")):
-            wait_for(
-                lambda: robot_up(exporter, "victim1") == 1.0, 15, interval=0.1, message="victim1 up again"
-            )
-            assert exporter.robot("victim1")["level"] == LEVELS["ERROR"]  # type: ignore[index]
+            assert down_after < 5, f"down after {down_after:.1f}s; the robot timeout is 60s"
+            document = exporter.robot("victim1")
+            assert document is not None and document["up"] is False and document["level"] == LEVELS["STALE"]
+            assert robot_up(exporter, "keeper1") == 1.0
+            with running_simulator(tmp_path, 0, *victim_args):
+                wait_for(lambda: robot_up(exporter, "victim1") == 1.0, 15, interval=0.1, message="victim1 up")
+                assert exporter.robot("victim1")["level"] == LEVELS["ERROR"]  # type: ignore[index]
 
 
 def test_a_robot_with_another_type_hash_is_heard_and_the_mismatch_counted(tmp_path: Path) -> None:
@@ -242,3 +240,28 @@ def test_the_simulator_sends_rmw_zenoh_attachment_and_liveliness_tokens(tmp_path
         "::,:,:,:,,",
     ]
     assert any(t.endswith("/NN/%/%a%b1/diagnostic_aggregator") for t in tokens)
+
+
+def test_the_shard_and_the_robot_cap_hold_over_zenoh(tmp_path: Path) -> None:
+    # Of robot1…robot8, shard 0/2 owns robot1, robot2, robot3 and robot8; the cap keeps two of them.
+    config = tmp_path / "overseer.yml"
+    config.write_text("fleet:\n  max_robots: 2\n")
+    with (
+        running_router(tmp_path) as port,
+        running_exporter(
+            tmp_path, None, *exporter_args(port, f"--config.file={config}", "--shard=0/2")
+        ) as exporter,
+        running_simulator(tmp_path, 0, *simulator_args(port, "--robots=8", "--components=5")),
+    ):
+        wait_for(
+            lambda: metric(exporter, "overseer_statuses_dropped_total", reason="robot_limit"),
+            30,
+            message="robots beyond the cap counted",
+        )
+        robots = {r["robot"] for r in exporter.get_json("/api/v1/robots")["robots"]}
+        assert len(robots) == 2 and robots <= {"robot1", "robot2", "robot3", "robot8"}
+        wait_for(
+            lambda: metric(exporter, "overseer_messages_total", transport="zenoh", result="dropped"),
+            10,
+            message="messages of refused robots counted",
+        )

@@ -82,28 +82,26 @@ class ZenohSource:
         if self._thread is not None:
             self._thread.join(timeout=2)
 
-    @property
-    def connected(self) -> bool:
-        """True once the session is open and subscribed."""
-        return bool(self._declared)
-
     def _run(self) -> None:
         session = self._open()
         if session is None:
             return
+        domain, formats = self._config.domain, self._config.key_formats
+        # Declared without the lock held: the liveliness history is delivered to `_on_token`, which takes it.
+        declared = [
+            session.declare_subscriber(key, self._on_data) for key in data_subscriptions(domain, formats)
+        ]
+        liveliness = session.liveliness()
+        tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
+        tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
+        declared += [liveliness.declare_subscriber(key, self._on_token, history=True) for key in tokens]
         with self._lock:
-            if self._stop.is_set():
-                session.close()  # type: ignore[no-untyped-call]
-                return
-            self._session = session
-            domain, formats = self._config.domain, self._config.key_formats
-            for key in data_subscriptions(domain, formats):
-                self._declared.append(session.declare_subscriber(key, self._on_data))
-            liveliness = session.liveliness()
-            tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
-            tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
-            for key in tokens:
-                self._declared.append(liveliness.declare_subscriber(key, self._on_token, history=True))
+            stopped = self._stop.is_set()
+            if not stopped:
+                self._session, self._declared = session, declared
+        if stopped:
+            session.close()  # type: ignore[no-untyped-call]
+            return
         log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
         while not self._stop.wait(PRUNE_INTERVAL_SECONDS):
             self._prune()
