@@ -32,6 +32,8 @@ from overseer.sources.zenoh_keys import (
 log = logging.getLogger(__name__)
 
 NODE_NAME = "diagnostic_aggregator"
+SPREAD = 0.8  # share of the period over which one round of publications is spread
+_PACE_EVERY = 20
 _I64 = struct.Struct("<q")
 
 
@@ -106,7 +108,12 @@ class ZenohFleetSimulator(FleetSimulator):
         now = time.time()
         stamp = struct.pack("<iI", int(now), int((now % 1) * 1e9))
         written = 0
-        for robot in self.robots:
+        # Real robots are not in step: their publications are spread over most of the period, so one
+        # process standing in for a fleet does not overflow its single session's queue in one burst.
+        started, spread, count = time.monotonic(), SPREAD / self.settings.rate, len(self.robots)
+        for index, robot in enumerate(self.robots):
+            if index % _PACE_EVERY == 0 and index:
+                self._stop.wait(max(0.0, started + spread * index / count - time.monotonic()))
             writer = self._zenoh_writers.get(robot.name)
             if writer is None:
                 continue
