@@ -265,3 +265,30 @@ def test_the_shard_and_the_robot_cap_hold_over_zenoh(tmp_path: Path) -> None:
             10,
             message="messages of refused robots counted",
         )
+
+
+def test_a_restarted_router_is_joined_again_and_its_robots_with_it(tmp_path: Path) -> None:
+    port = free_port()
+    router = start_router(tmp_path, port)
+    try:
+        with (
+            running_exporter(tmp_path, None, *exporter_args(port, "--fleet.robot-timeout=60s")) as exporter,
+            running_simulator(tmp_path, 0, *simulator_args(port, "--robots=1", "--components=5")),
+        ):
+            wait_until_heard(exporter, "robot1", 10)
+            router.stop()
+            # The exporter cannot hear the robot any more: its token is gone with the link.
+            wait_for(lambda: robot_up(exporter, "robot1") == 0.0, 10, interval=0.1, message="robot1 down")
+            router = start_router(tmp_path, port)
+            wait_for(lambda: robot_up(exporter, "robot1") == 1.0, 30, interval=0.2, message="robot1 up again")
+            received = metric(exporter, "overseer_messages_total", transport="zenoh", result="received") or 0
+            wait_for(
+                lambda: (
+                    (metric(exporter, "overseer_messages_total", transport="zenoh", result="received") or 0)
+                    > received + 1
+                ),
+                10,
+                message="messages flowing again",
+            )
+    finally:
+        router.stop()
