@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import logging
 import threading
+from typing import Any
 
 import zenoh
+from zenoh.handlers import FifoChannel
 
 from overseer.codec import DecodeError, cdr
 from overseer.config import ZenohConfig
@@ -43,6 +45,7 @@ RETRY_MIN_SECONDS = 0.5
 RETRY_MAX_SECONDS = 10.0
 PRUNE_INTERVAL_SECONDS = 60.0
 MAX_TOKENS_PER_ROBOT = 64
+CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
 
 
 class ZenohSource:
@@ -60,7 +63,7 @@ class ZenohSource:
         self._ingests: dict[tuple[str, str], PayloadIngest] = {}  # (robot, kind) → its topic's ingest
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
         self._session: zenoh.Session | None = None
-        self._declared: list[zenoh.Subscriber[None]] = []
+        self._declared: list[zenoh.Subscriber[Any]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -88,9 +91,16 @@ class ZenohSource:
             return
         domain, formats = self._config.domain, self._config.key_formats
         # Declared without the lock held: the liveliness history is delivered to `_on_token`, which takes it.
-        declared = [
-            session.declare_subscriber(key, self._on_data) for key in data_subscriptions(domain, formats)
-        ]
+        declared: list[zenoh.Subscriber[Any]] = []
+        for key in data_subscriptions(domain, formats):
+            # Samples queue in a channel that Zenoh fills without the GIL, and a thread of ours drains it:
+            # a callback would hold Zenoh's receiving thread on the GIL for every sample, so a busy moment
+            # in Python would stall the link and the router would drop samples.
+            subscriber = session.declare_subscriber(key, FifoChannel(CHANNEL_CAPACITY))
+            declared.append(subscriber)
+            drain = threading.Thread(target=self._drain, args=(subscriber.handler,), name="zenoh-data")
+            drain.daemon = True
+            drain.start()
         liveliness = session.liveliness()
         tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
         tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
@@ -117,6 +127,15 @@ class ZenohSource:
             self._stop.wait(delay)
             delay = min(delay * 2, RETRY_MAX_SECONDS)
         return None
+
+    def _drain(self, channel: Any) -> None:
+        """Hand every sample of one subscription's channel to `_on_data` until it is closed."""
+        while True:
+            try:
+                sample = channel.recv()
+            except zenoh.ZError:  # closed: the subscriber was undeclared
+                return
+            self._on_data(sample)
 
     def _on_data(self, sample: zenoh.Sample) -> None:
         try:
