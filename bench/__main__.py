@@ -15,6 +15,7 @@ from bench.common import ROW_PREFIX, Row, print_table
 BENCHMARKS = (
     "bench.bench_ingest",
     "bench.bench_fleet",
+    "bench.bench_zenoh",
     "bench.bench_scrape",
     "bench.bench_memory",
     "bench.bench_check",

@@ -123,6 +123,21 @@ def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(
         assert fast == reference
 
 
+def test_a_lost_publisher_renders_its_robot_down_and_a_returning_one_up() -> None:
+    model, _ = fleet()
+    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    robot = 'robot0/quote"d'
+    label = b'ros_diagnostics_robot_up{robot="robot0/quote\\"d"} '
+    assert label + b"1.0" in exposition.render()
+    model.set_publisher_alive(robot, False)
+    fast, reference = both(model, exposition)
+    assert fast == reference and label + b"0.0" in fast
+    assert b'ros_diagnostics_level{component="/Motor",hardware_id="m1",robot="robot0/quote\\"d"} 3.0' in fast
+    model.set_publisher_alive(robot, True)
+    fast, reference = both(model, exposition)
+    assert fast == reference and label + b"1.0" in fast
+
+
 def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     model, _ = fleet()
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
@@ -178,6 +193,7 @@ _steps = st.one_of(
     st.tuples(st.just("advance"), st.sampled_from([1.0, 3.0, 6.0, 11.0, 61.0])),
     st.tuples(st.just("expire")),
     st.tuples(st.just("forget"), _robots),
+    st.tuples(st.just("alive"), _robots, st.booleans()),
 )
 
 
@@ -209,6 +225,8 @@ def test_cached_exposition_equals_collector_through_any_changes(
                 model.expire()
             case ("forget", str(robot)):
                 model.forget_topic(robot, "t")
+            case ("alive", str(robot), bool(alive)):
+                model.set_publisher_alive(robot, alive)
         fast, reference = both(model, exposition, messages=messages, external_url=external_url)
         assert fast == reference
 

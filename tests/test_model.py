@@ -89,6 +89,25 @@ def test_silent_robot_is_down_with_every_component_stale() -> None:
     assert snapshot.component_level(robot, ("/a", ""), robot.components[("/a", "")], False) is Level.STALE
 
 
+def test_robot_whose_publisher_is_gone_is_down_at_once_and_up_when_it_returns() -> None:
+    model, _ = make_model(stale_after=5, robot_timeout=60)
+    model.apply("r1", array(status("/a", 1)), "zenoh")
+    model.set_publisher_alive("r1", False)
+    snapshot = model.snapshot()
+    robot = snapshot.robots[0]
+    assert not snapshot.robot_up(robot)
+    assert snapshot.robot_level(robot) is Level.STALE
+    model.apply("r1", array(status("/a", 1)), "zenoh")  # a message does not overrule the liveliness
+    model.touch("r1", "zenoh")
+    assert not model.snapshot().robot_up(model.snapshot().robots[0])
+    model.set_publisher_alive("r1", True)
+    snapshot = model.snapshot()
+    assert snapshot.robot_up(snapshot.robots[0])
+    assert snapshot.robot_level(snapshot.robots[0]) is Level.WARN
+    model.set_publisher_alive("unknown", False)  # nothing to do, nothing created
+    assert [r.name for r in model.snapshot().robots] == ["r1"]
+
+
 def test_silent_robot_is_forgotten_after_expiry() -> None:
     model, clock = make_model(stale_after=5, robot_timeout=10, expire_after=60)
     model.apply("r1", array(status("/a")), "dds")

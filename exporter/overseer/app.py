@@ -49,6 +49,10 @@ class Exporter:
 
             robots = tuple(robot for robot in self.config.ros1.robots if self.config.shard.owns(robot.name))
             self.sources.append(Ros1Source(replace(self.config.ros1, robots=robots), self.model))
+        if self.config.zenoh.enabled:
+            from overseer.sources.zenoh import ZenohSource
+
+            self.sources.append(ZenohSource(self.config.zenoh, self.model, self.config.shard))
         registry = CollectorRegistry(auto_describe=True)
         transports = [source.transport for source in self.sources]
         value_keys = self.config.metrics.value_key_pattern

@@ -147,6 +147,13 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help="the URL users reach this exporter at, for links to the status page in alerts",
     )
     parser.add_argument(
+        "--dds.disabled",
+        dest="dds_disabled",
+        action="store_true",
+        help="do not join DDS (with Zenoh or ROS 1 only)",
+    )
+    _add_zenoh_flags(parser, exporter=True)
+    parser.add_argument(
         "--shard",
         metavar="I/N",
         help="follow only the robots whose name hashes to shard I of N (default 0/1)",
@@ -184,6 +191,44 @@ _ICINGA2_FLAGS = (
 )
 
 
+def _add_zenoh_flags(parser: argparse.ArgumentParser, exporter: bool) -> None:
+    parser.add_argument(
+        "--zenoh.connect",
+        dest="zenoh_connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="a Zenoh router or peer to connect to, e.g. tcp/router.example:7447; repeat for several",
+    )
+    parser.add_argument(
+        "--zenoh.listen",
+        dest="zenoh_listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="a Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447; repeat for several",
+    )
+    parser.add_argument(
+        "--zenoh.mode",
+        dest="zenoh_mode",
+        choices=["client", "peer"],
+        help="Zenoh session mode (default client)",
+    )
+    if not exporter:
+        return
+    parser.add_argument(
+        "--zenoh.domain",
+        dest="zenoh_domain",
+        type=int,
+        metavar="N",
+        help="ROS domain of rmw_zenoh keys (default 0)",
+    )
+    parser.add_argument(
+        "--zenoh.config",
+        dest="zenoh_config",
+        metavar="FILE",
+        help="native Zenoh JSON5 configuration (TLS, mTLS, access control)",
+    )
+
+
 def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robots", type=int, default=3, help="number of robots (default 3)")
     parser.add_argument("--components", type=int, default=10, help="leaf components per robot (default 10)")
@@ -206,6 +251,22 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="HOST[:PORT]",
         help="send DDS discovery to this host directly, e.g. the exporter's (networks without multicast)",
+    )
+    parser.add_argument(
+        "--transport", choices=["dds", "zenoh"], default="dds", help="publish over DDS or Zenoh (default dds)"
+    )
+    _add_zenoh_flags(parser, exporter=False)
+    parser.add_argument(
+        "--zenoh.bridge-keys",
+        dest="zenoh_bridge_keys",
+        action="store_true",
+        help="publish as zenoh-bridge-ros2dds does (<ns>/diagnostics_agg) instead of as rmw_zenoh",
+    )
+    parser.add_argument(
+        "--zenoh.type-hash",
+        dest="zenoh_type_hash",
+        metavar="RIHS01_…",
+        help="type hash in the rmw_zenoh keys (default: DiagnosticArray's in Jazzy)",
     )
     parser.add_argument(
         "--vary-values", action="store_true", help="change each robot's battery voltage at every publication"
@@ -252,6 +313,9 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, name)
         if value is not None:
             overrides[f"fleet.{name}"] = parse_duration(value, f"--fleet.{name.replace('_', '-')}")
+    if args.dds_disabled:
+        overrides["dds.enabled"] = False
+    overrides.update(_zenoh_overrides(args))
     if args.shard is not None:
         overrides["shard"] = args.shard
     if args.log_level is not None:
@@ -297,6 +361,22 @@ def _ros1_robot_overrides(named: list[str], masters: list[str]) -> list[dict[str
     for uri in masters:
         robots.append({"master_uri": uri, **({"name": names_for_master[0]} if names_for_master else {})})
     return robots
+
+
+def _zenoh_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The `zenoh.*` keys given as flags; any of them turns the Zenoh transport on."""
+    overrides: dict[str, Any] = {}
+    for flag, key in (
+        ("zenoh_connect", "connect"),
+        ("zenoh_listen", "listen"),
+        ("zenoh_mode", "mode"),
+        ("zenoh_domain", "domain"),
+        ("zenoh_config", "config"),
+    ):
+        value = getattr(args, flag)
+        if value is not None:
+            overrides[f"zenoh.{key}"] = value
+    return overrides
 
 
 def _configure_logging(level: str, log_format: str = "text") -> None:
@@ -377,19 +457,45 @@ def _simulate(args: argparse.Namespace) -> int:
     from overseer.simulator.publisher import EventError, FleetSimulator
 
     try:
-        simulator = FleetSimulator(settings)
+        simulator = FleetSimulator(settings) if args.transport == "dds" else _zenoh_simulator(args, settings)
     except EventError as error:
         raise ConfigError(str(error)) from None
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: simulator.stop())
+    where = f"DDS domain {settings.domain}"
+    if args.transport == "zenoh":
+        where = (
+            f"Zenoh ({'bridge keys' if args.zenoh_bridge_keys else f'rmw_zenoh, domain {settings.domain}'})"
+        )
     print(
         f"simulating {settings.robots} robots x {settings.components} components at {settings.rate:g} Hz "
-        f"on DDS domain {settings.domain}",
+        f"on {where}",
         flush=True,
     )
     simulator.run(args.duration)
     print(f"published {simulator.published} messages", flush=True)
     return 0
+
+
+def _zenoh_simulator(args: argparse.Namespace, settings: Any) -> Any:
+    """The simulator publishing over Zenoh, as rmw_zenoh or as zenoh-bridge-ros2dds does."""
+    from overseer.simulator.zenoh_publisher import ZenohFleetSimulator, ZenohSettings
+    from overseer.sources.zenoh_keys import DIAGNOSTIC_ARRAY_HASH
+
+    type_hash = args.zenoh_type_hash or DIAGNOSTIC_ARRAY_HASH
+    if not re.fullmatch(r"[A-Za-z0-9_]+", type_hash):
+        raise ConfigError(f"--zenoh.type-hash: expected letters, digits and _, got {type_hash!r}")
+    zenoh_settings = ZenohSettings(
+        connect=tuple(args.zenoh_connect or ()),
+        listen=tuple(args.zenoh_listen or ()),
+        mode=args.zenoh_mode or "peer",
+        bridge_keys=args.zenoh_bridge_keys,
+        type_hash=type_hash,
+    )
+    try:
+        return ZenohFleetSimulator(settings, zenoh_settings)
+    except Exception as error:  # zenoh.ZError: an endpoint Zenoh refuses, a router a client cannot reach
+        raise ConfigError(f"--zenoh.*: cannot open the Zenoh session: {error}") from None
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -102,6 +102,30 @@ class Ros1Config:
         return bool(self.robots)
 
 
+ZENOH_MODES = ("client", "peer")
+ZENOH_KEY_FORMATS = ("rmw_zenoh", "bridge")
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """The Zenoh transport: rmw_zenoh robots and robots behind zenoh-bridge-ros2dds, through routers."""
+
+    enabled: bool = False
+    mode: str | None = None  # client unless the Zenoh config file says otherwise
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    domain: int = 0
+    config: str | None = None  # a native Zenoh JSON5 configuration file (TLS, access control)
+    key_formats: tuple[str, ...] = ZENOH_KEY_FORMATS
+    robot_name: str | None = None  # for diagnostics topics without a namespace (default "domain<N>")
+    multicast_scouting: bool = False
+
+    @property
+    def unnamespaced_robot(self) -> str:
+        """The robot name for `/diagnostics_agg` without a namespace."""
+        return self.robot_name or f"domain{self.domain}"
+
+
 @dataclass(frozen=True)
 class WebConfig:
     """The HTTP endpoint; `config_file` is an exporter-toolkit web config (TLS, basic auth)."""
@@ -149,6 +173,7 @@ class Config:
     web: WebConfig = field(default_factory=WebConfig)
     dds: DdsConfig = field(default_factory=DdsConfig)
     ros1: Ros1Config = field(default_factory=Ros1Config)
+    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     fleet: FleetLimits = field(default_factory=FleetLimits)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
@@ -278,11 +303,24 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
     _reject_unknown(
         raw,
         "",
-        {"web", "dds", "ros1", "fleet", "metrics", "shard", "log_level", "events", "log_format", "icinga2"},
+        {
+            "web",
+            "dds",
+            "ros1",
+            "zenoh",
+            "fleet",
+            "metrics",
+            "shard",
+            "log_level",
+            "events",
+            "log_format",
+            "icinga2",
+        },
     )
     web = _section(raw, "web", {"listen_address", "config_file", "external_url"})
     dds = _section(raw, "dds", {f.name for f in fields(DdsConfig)})
     ros1 = _section(raw, "ros1", {f.name for f in fields(Ros1Config)})
+    zenoh = _section(raw, "zenoh", {f.name for f in fields(ZenohConfig)})
     fleet = _section(raw, "fleet", {f.name for f in fields(FleetLimits)})
     metrics = _section(raw, "metrics", {"value_keys", "message_labels", "message_label_length"})
 
@@ -301,6 +339,7 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         config,
         dds=_dds_config(dds),
         ros1=_ros1_config(ros1),
+        zenoh=_zenoh_config(zenoh),
         fleet=_fleet_limits(fleet),
         metrics=_metrics_config(metrics),
     )
@@ -428,6 +467,56 @@ def _ros1_config(raw: dict[str, Any]) -> Ros1Config:
             f"ros1.reconnect_max: must not be shorter than ros1.reconnect_min, got {config.reconnect_max:g}s"
         )
     return config
+
+
+_ZENOH_ENDPOINT = re.compile(r"[a-z][a-z0-9-]*/\S+")
+
+
+def _zenoh_config(raw: dict[str, Any]) -> ZenohConfig:
+    """Any Zenoh key turns the transport on, unless `enabled` says otherwise."""
+    defaults = ZenohConfig()
+    mode = raw.get("mode", defaults.mode)
+    if mode is not None and mode not in ZENOH_MODES:
+        raise ConfigError(f"zenoh.mode: expected client or peer, got {mode!r}")
+    endpoints: dict[str, tuple[str, ...]] = {}
+    for key in ("connect", "listen"):
+        values = raw.get(key, [])
+        items = tuple(_string(v, f"zenoh.{key}") for v in (values if isinstance(values, list) else [values]))
+        for endpoint in items:
+            if not _ZENOH_ENDPOINT.fullmatch(endpoint):
+                raise ConfigError(
+                    f"zenoh.{key}: expected an endpoint such as tcp/host:7447, got {endpoint!r}"
+                )
+        endpoints[key] = items
+    domain = raw.get("domain", defaults.domain)
+    if not isinstance(domain, int) or isinstance(domain, bool) or not 0 <= domain <= 232:
+        raise ConfigError(f"zenoh.domain: expected a ROS domain id from 0 to 232, got {domain!r}")
+    formats = defaults.key_formats
+    if "key_formats" in raw:
+        listed = _list(raw["key_formats"], "zenoh.key_formats")
+        formats = tuple(_string(f, "zenoh.key_formats") for f in listed)
+        for name in formats:
+            if name not in ZENOH_KEY_FORMATS:
+                raise ConfigError(f"zenoh.key_formats: expected rmw_zenoh or bridge, got {name!r}")
+        if not formats:
+            raise ConfigError("zenoh.key_formats: expected at least one of rmw_zenoh, bridge, got []")
+    file = raw.get("config")
+    if file is not None and not Path(_string(file, "zenoh.config")).is_file():
+        raise ConfigError(f"zenoh.config: cannot read {file!r}: no such file")
+    robot_name = raw.get("robot_name")
+    return ZenohConfig(
+        enabled=_bool(raw.get("enabled", bool(raw)), "zenoh.enabled"),
+        mode=mode,
+        connect=endpoints["connect"],
+        listen=endpoints["listen"],
+        domain=domain,
+        config=file,
+        key_formats=formats,
+        robot_name=None if robot_name is None else _string(robot_name, "zenoh.robot_name"),
+        multicast_scouting=_bool(
+            raw.get("multicast_scouting", defaults.multicast_scouting), "zenoh.multicast_scouting"
+        ),
+    )
 
 
 def _ros1_robot(item: object, key: str) -> Ros1Robot:

@@ -12,6 +12,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -104,6 +105,7 @@ class FleetModel:
                 state.revision,
                 state.latest,
                 state.missing,
+                state.publisher_alive,
             )
             self._message_counts[(transport, "received")] += 1
         return True
@@ -127,10 +129,10 @@ class FleetModel:
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
                     return Applied(False, None)
                 components: dict[ComponentKey, Component] = {}
-                revision, discovered_at = 0, now
+                revision, discovered_at, alive = 0, now, True
             else:
                 components = dict(state.components)
-                revision, discovered_at = state.revision, state.discovered_at
+                revision, discovered_at, alive = state.revision, state.discovered_at, state.publisher_alive
             latest: list[ComponentKey | None] = []
             in_message: set[ComponentKey] = set()
             for entry in prepared:
@@ -175,6 +177,7 @@ class FleetModel:
                 revision + 1,
                 tuple(latest),
                 missing,
+                alive,
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
@@ -253,11 +256,19 @@ class FleetModel:
                 revision + 1,
                 latest,
                 state.missing,
+                state.publisher_alive,
             )
             self._message_counts[(transport, "received")] += 1
         if changes and listener is not None:
             listener(robot, now, changes)
         return revision + 1
+
+    def set_publisher_alive(self, robot: str, alive: bool) -> None:
+        """Record that the robot's diagnostics publisher is alive or gone (no-op for an unknown robot)."""
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is not None and state.publisher_alive is not alive:
+                self._robots[robot] = replace(state, publisher_alive=alive)
 
     def forget_topic(self, robot: str, topic: str) -> None:
         """Drop the components a robot reported on `topic` (when it turns out to publish a better one)."""
@@ -407,4 +418,5 @@ def _replace_components(state: RobotState, components: dict[ComponentKey, Compon
         state.revision + 1,
         tuple(key if key in components else None for key in state.latest),
         state.missing.intersection(components),
+        state.publisher_alive,
     )

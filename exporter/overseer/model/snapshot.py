@@ -26,9 +26,11 @@ class FleetSnapshot:
     source_errors: Mapping[tuple[str, str], int] = field(default_factory=dict)
 
     def robot_up(self, robot: RobotState) -> bool:
-        """True while the robot's messages arrive within `robot_timeout`."""
+        """True while the robot's messages arrive within `robot_timeout` and its publisher is alive."""
         return (
-            robot.last_message is not None and self.taken_at - robot.last_message <= self.limits.robot_timeout
+            robot.publisher_alive
+            and robot.last_message is not None
+            and self.taken_at - robot.last_message <= self.limits.robot_timeout
         )
 
     @staticmethod

@@ -65,6 +65,8 @@ class RobotState:
     or None where the status lost something (dropped, cut short, or a repeated name): an ingest may
     then apply only the statuses that changed (`FleetModel.apply_changes`). `missing` holds the
     components absent from the latest message; it is empty for almost every robot, so it is shared.
+    `publisher_alive` is False while a transport that tracks publishers (Zenoh liveliness) knows the
+    robot's diagnostics publisher is gone: the robot is down at once, before `robot_timeout`.
     """
 
     name: str
@@ -75,6 +77,7 @@ class RobotState:
     revision: int = 0
     latest: tuple[ComponentKey | None, ...] = ()
     missing: frozenset[ComponentKey] = frozenset()
+    publisher_alive: bool = True  # False once the transport saw the robot's publisher go (liveliness)
 
     @property
     def last_seen(self) -> float:

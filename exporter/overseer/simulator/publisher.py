@@ -200,20 +200,24 @@ class FleetSimulator:
             writer = self._writers.get(robot.name)
             if writer is None:
                 continue
-            if robot.payload_tail is None:
-                robot.payload_tail = bytearray(self.encode(robot)[12:])
-                robot.varying_at = robot.payload_tail.find(VARYING_PLACEHOLDER.encode())
-            if robot.varying_at >= 0:
-                # A voltage that changes at every publication, as real ones do, without re-encoding.
-                reading = f"{12.0 + (now * 7.3 % 1.0):0{len(VARYING_PLACEHOLDER)}.5f}"
-                robot.payload_tail[robot.varying_at : robot.varying_at + len(reading)] = reading.encode()
-            result = ddspy_write(writer._ref, b"\x00\x01\x00\x00" + stamp + bytes(robot.payload_tail))
+            result = ddspy_write(writer._ref, self.payload(robot, now, stamp))
             if result < 0:
                 log.warning("writing %s failed with DDS error %d", robot.name, result)
             else:
                 written += 1
         self.published += written
         return written
+
+    def payload(self, robot: SimulatedRobot, now: float, stamp: bytes) -> bytes:
+        """The robot's serialized array (CDR with its header) stamped `stamp`, varied for `now` if asked."""
+        if robot.payload_tail is None:
+            robot.payload_tail = bytearray(self.encode(robot)[12:])
+            robot.varying_at = robot.payload_tail.find(VARYING_PLACEHOLDER.encode())
+        if robot.varying_at >= 0:
+            # A voltage that changes at every publication, as real ones do, without re-encoding.
+            reading = f"{12.0 + (now * 7.3 % 1.0):0{len(VARYING_PLACEHOLDER)}.5f}"
+            robot.payload_tail[robot.varying_at : robot.varying_at + len(reading)] = reading.encode()
+        return b"\x00\x01\x00\x00" + stamp + bytes(robot.payload_tail)
 
     def encode(self, robot: SimulatedRobot) -> bytes:
         """The robot's current DiagnosticArray as little-endian CDR, padded to whole words."""
@@ -236,7 +240,7 @@ class FleetSimulator:
         log.info("event at %.1fs: %s %s %s", event.at, event.robot, event.component or "", event.action)
         if event.action == "stop":
             robot.running = False
-            self._writers.pop(robot.name, None)
+            self._close_writer(robot)
         elif event.action == "start":
             robot.running = True
             self._open_writer(robot)
@@ -248,6 +252,9 @@ class FleetSimulator:
             else:
                 robot.levels[event.component] = Level[event.action]
             robot.payload_tail = None
+
+    def _close_writer(self, robot: SimulatedRobot) -> None:
+        self._writers.pop(robot.name, None)
 
     def _open_writer(self, robot: SimulatedRobot) -> None:
         if not robot.running or robot.name in self._writers:

@@ -1,0 +1,156 @@
+"""Zenoh key expressions and the `zenoh:` configuration section, without a network."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from rosbags.typesys import Stores, get_typestore
+
+from overseer.config import ConfigError, ZenohConfig, load_config
+from overseer.sources.zenoh_keys import (
+    BRIDGE,
+    DIAGNOSTIC_ARRAY_HASH,
+    DIAGNOSTIC_ARRAY_TYPE,
+    RMW_ZENOH,
+    DiagnosticsKey,
+    RejectedKey,
+    bridge_key,
+    bridge_publisher_token,
+    data_key,
+    parse_bridge_token,
+    parse_data_key,
+    parse_publisher_token,
+    publisher_token,
+)
+from overseer.sources.zenoh_session import session_config
+
+
+def test_the_type_hash_is_diagnostic_arrays_in_jazzy_as_rosbags_computes_it() -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    assert store.hash_rihs01("diagnostic_msgs/msg/DiagnosticArray") == DIAGNOSTIC_ARRAY_HASH
+
+
+@pytest.mark.parametrize(
+    ("key", "expected"),
+    [
+        (data_key(0, "robot1", "diagnostics_agg"), ("robot1", "diagnostics_agg", RMW_ZENOH)),
+        (data_key(0, "site_a/robot7", "diagnostics"), ("site_a/robot7", "diagnostics", RMW_ZENOH)),
+        (data_key(0, "", "diagnostics_agg"), ("", "diagnostics_agg", RMW_ZENOH)),
+        (bridge_key("site_a/robot7", "diagnostics_agg"), ("site_a/robot7", "diagnostics_agg", BRIDGE)),
+        (bridge_key("", "diagnostics"), ("", "diagnostics", BRIDGE)),
+    ],
+)
+def test_data_keys_of_both_formats_name_the_robot_by_its_namespace(
+    key: str, expected: tuple[str, str, str]
+) -> None:
+    parsed = parse_data_key(key, 0)
+    assert (parsed.namespace, parsed.kind, parsed.key_format) == expected
+
+
+def test_another_type_hash_is_still_a_diagnostics_key() -> None:
+    parsed = parse_data_key(data_key(3, "r", "diagnostics_agg", "RIHS01_00"), 3)
+    assert parsed == DiagnosticsKey("r", "diagnostics_agg", RMW_ZENOH, "RIHS01_00")
+
+
+@pytest.mark.parametrize(
+    ("key", "reason"),
+    [
+        (f"0/r/diagnostics_agg/std_msgs::msg::dds_::String_/{DIAGNOSTIC_ARRAY_HASH}", "unexpected_type"),
+        (data_key(1, "r", "diagnostics_agg"), "unrecognised_key"),  # another domain
+        (f"0/r/diagnostics_agg/{DIAGNOSTIC_ARRAY_TYPE}", "unrecognised_key"),  # no hash
+        (data_key(0, "9lives", "diagnostics_agg"), "invalid_namespace"),
+        (data_key(0, "we ird", "diagnostics_agg"), "invalid_namespace"),
+        ("ro\u2603bot/diagnostics_agg", "invalid_namespace"),
+        ("0/robot1/diagnostics_agg", "invalid_namespace"),  # a domain where a namespace goes
+    ],
+)
+def test_keys_that_are_not_a_robots_diagnostics_are_rejected_with_a_reason(key: str, reason: str) -> None:
+    with pytest.raises(RejectedKey, match=reason):
+        parse_data_key(key, 0)
+
+
+def test_publisher_tokens_name_the_robot_and_other_tokens_are_ignored() -> None:
+    token = publisher_token(
+        0, "abc", 12, "site_a/robot7", "aggregator", "diagnostics_agg", DIAGNOSTIC_ARRAY_HASH
+    )
+    assert parse_publisher_token(token, 0) == DiagnosticsKey(
+        "site_a/robot7", "diagnostics_agg", RMW_ZENOH, DIAGNOSTIC_ARRAY_HASH
+    )
+    assert parse_publisher_token(token, 1) is None
+    assert parse_publisher_token(token.replace("/MP/", "/MS/"), 0) is None  # a subscription
+    assert (
+        parse_publisher_token(token.replace(DIAGNOSTIC_ARRAY_TYPE, "std_msgs::msg::dds_::String_"), 0) is None
+    )
+    assert parse_publisher_token(token.replace("%diagnostics_agg", "%diagnostics_aggx"), 0) is None
+    assert parse_publisher_token(token.replace("%site_a", "%9site"), 0) is None
+    assert parse_publisher_token(token + "/extra", 0) is None
+    unnamespaced = publisher_token(0, "abc", 1, "", "agg", "diagnostics", DIAGNOSTIC_ARRAY_HASH)
+    assert parse_publisher_token(unnamespaced, 0) == DiagnosticsKey(
+        "", "diagnostics", RMW_ZENOH, DIAGNOSTIC_ARRAY_HASH
+    )
+
+
+def test_bridge_tokens_name_the_robot_and_other_tokens_are_ignored() -> None:
+    token = bridge_publisher_token("f00d", "site_a/robot7", "diagnostics_agg")
+    assert (
+        token
+        == "@/f00d/@ros2_lv/MP/site_a§robot7§diagnostics_agg/diagnostic_msgs§msg§DiagnosticArray/:1:0:0,10"
+    )
+    assert parse_bridge_token(token) == DiagnosticsKey("site_a/robot7", "diagnostics_agg", BRIDGE, "")
+    assert parse_bridge_token(bridge_publisher_token("f00d", "", "diagnostics")) == DiagnosticsKey(
+        "", "diagnostics", BRIDGE, ""
+    )
+    assert parse_bridge_token(token.replace("DiagnosticArray", "String")) is None
+    assert parse_bridge_token(token.replace("/MP/", "/MS/")) is None
+    assert parse_bridge_token(token.replace("site_a§", "9§")) is None
+    assert parse_bridge_token(token + "/x") is None
+
+
+def test_zenoh_section_turns_the_transport_on_with_its_keys(tmp_path: Path) -> None:
+    native = tmp_path / "zenoh.json5"
+    native.write_text('{mode: "peer", transport: {link: {tx: {lease: 5000}}}}')
+    file = tmp_path / "overseer.yml"
+    file.write_text(
+        "zenoh:\n  connect: [tcp/router.example:7447]\n  domain: 7\n"
+        f"  config: {native}\n  key_formats: [bridge]\n  robot_name: solo\n"
+    )
+    config = load_config(file).zenoh
+    assert config == ZenohConfig(
+        True, None, ("tcp/router.example:7447",), (), 7, str(native), ("bridge",), "solo"
+    )
+    assert not load_config(None).zenoh.enabled
+    assert load_config(None, {"zenoh.listen": ["tcp/0.0.0.0:7447"]}).zenoh.enabled
+    assert not load_config(None, {"zenoh.enabled": False, "zenoh.domain": 1}).zenoh.enabled
+    assert not load_config(None, {"dds.enabled": False}).dds.enabled
+    native_config = session_config(config)
+    assert native_config.get_json("mode") == '"peer"'  # the native file's, since none was given
+    assert native_config.get_json("connect/endpoints") == '["tcp/router.example:7447"]'
+    assert session_config(ZenohConfig(True)).get_json("scouting/multicast/enabled") == "false"
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"zenoh.mode": "router"}, "zenoh.mode: expected client or peer, got 'router'"),
+        ({"zenoh.connect": ["robot1:7447"]}, "zenoh.connect: expected an endpoint such as tcp/host:7447"),
+        ({"zenoh.listen": [7447]}, "zenoh.listen: expected a non-empty string, got 7447"),
+        ({"zenoh.domain": 300}, "zenoh.domain: expected a ROS domain id from 0 to 232, got 300"),
+        ({"zenoh.domain": "0"}, "zenoh.domain: expected a ROS domain id from 0 to 232, got '0'"),
+        ({"zenoh.key_formats": ["dds"]}, "zenoh.key_formats: expected rmw_zenoh or bridge, got 'dds'"),
+        ({"zenoh.key_formats": []}, "zenoh.key_formats: expected at least one"),
+        ({"zenoh.config": "/nonexistent/z.json5"}, "zenoh.config: cannot read '/nonexistent/z.json5'"),
+        ({"zenoh.enabled": "yes"}, "zenoh.enabled: expected true or false, got 'yes'"),
+        ({"zenoh.routers": []}, "zenoh.routers: unknown key"),
+    ],
+)
+def test_bad_zenoh_settings_are_refused_naming_the_key(overrides: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace("[", r"\[")):
+        load_config(None, overrides)
+
+
+def test_a_native_file_zenoh_cannot_read_is_refused_naming_the_key(tmp_path: Path) -> None:
+    native = tmp_path / "bad.json5"
+    native.write_text("{mode: ")
+    with pytest.raises(ConfigError, match=r"zenoh\.config: .* is not a usable Zenoh configuration"):
+        session_config(load_config(None, {"zenoh.config": str(native)}).zenoh)
