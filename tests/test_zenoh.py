@@ -20,7 +20,14 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.sources.zenoh_keys import DIAGNOSTIC_ARRAY_HASH, DIAGNOSTIC_ARRAY_TYPE, data_key
 from support.ports import free_port
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
-from support.zenoh import client_session, exporter_args, running_router, simulator_args, start_router
+from support.zenoh import (
+    client_session,
+    endpoint,
+    exporter_args,
+    running_router,
+    simulator_args,
+    start_router,
+)
 
 LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
 
@@ -292,3 +299,32 @@ def test_a_restarted_router_is_joined_again_and_its_robots_with_it(tmp_path: Pat
             )
     finally:
         router.stop()
+
+
+def test_two_sites_routers_that_come_up_later_are_both_followed(tmp_path: Path) -> None:
+    """Two routers that know nothing of each other (two sites): the exporter hears the robots of both.
+
+    A client session keeps a link to one router only, so with several endpoints the exporter is a peer.
+    """
+    first, second = free_port(), free_port()
+    args = ("--dds.disabled", f"--zenoh.connect={endpoint(first)}", f"--zenoh.connect={endpoint(second)}")
+    with running_exporter(tmp_path, None, *args) as exporter:
+        routers = [start_router(tmp_path, first), start_router(tmp_path, second)]
+        try:
+            with (
+                running_simulator(
+                    tmp_path,
+                    0,
+                    *simulator_args(first, "--robots=1", "--components=5", "--namespace-prefix=a"),
+                ),
+                running_simulator(
+                    tmp_path,
+                    0,
+                    *simulator_args(second, "--robots=1", "--components=5", "--namespace-prefix=b"),
+                ),
+            ):
+                wait_until_heard(exporter, "a1", 10, timeout=45)
+                wait_until_heard(exporter, "b1", 10, timeout=45)
+        finally:
+            for router in routers:
+                router.stop()

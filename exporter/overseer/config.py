@@ -111,7 +111,7 @@ class ZenohConfig:
     """The Zenoh transport: rmw_zenoh robots and robots behind zenoh-bridge-ros2dds, through routers."""
 
     enabled: bool = False
-    mode: str | None = None  # client unless the Zenoh config file says otherwise
+    mode: str | None = None  # client of one router, peer of several, unless the Zenoh config file says
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     domain: int = 0

@@ -24,7 +24,7 @@ def session_config(config: ZenohConfig) -> zenoh.Config:
             ) from None
     else:
         native = zenoh.Config()
-    mode = config.mode or ("client" if config.config is None else None)
+    mode = config.mode or (default_mode(config.connect) if config.config is None else None)
     if mode is not None:
         _insert(native, "mode", mode, "zenoh.mode")
     if config.connect:
@@ -41,6 +41,15 @@ def session_config(config: ZenohConfig) -> zenoh.Config:
     _insert(native, "connect/exit_on_failure", {"client": True, "peer": False}, "zenoh.connect")
     _insert(native, "connect/retry", _RETRY, "zenoh.connect")
     return native
+
+
+def default_mode(connect: tuple[str, ...]) -> str:
+    """Client of the one router given; peer with several, since a client keeps a link to one router only.
+
+    Sites' routers need not know each other, so the exporter must hold a link to each of them; a peer
+    connects to every endpoint it is given and keeps trying those it cannot reach.
+    """
+    return "peer" if len(connect) > 1 else "client"
 
 
 def _insert(native: zenoh.Config, path: str, value: object, key: str) -> None:
