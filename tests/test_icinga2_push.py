@@ -7,6 +7,7 @@ exporter, with an exporter id and robot names of its own, fed by the simulator o
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -46,6 +47,12 @@ object Service "keep-me" {
 object Host "taken1" {
 	check_command = "dummy"
 	vars.owner = "operator"
+}
+template Host "fleet-robot" {
+	vars.site_contact = "robots@example"
+}
+template Service "fleet-diagnostics" {
+	vars.notes_from_template = "pushed by overseer"
 }
 """
 FAST_FLEET = ("--fleet.stale-after=1s", "--fleet.robot-timeout=2s")
@@ -490,3 +497,20 @@ def test_a_bad_icinga2_section_stops_the_exporter_naming_the_key(
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("overseer run: configuration error: " + message), done.stderr
     assert "secret" not in done.stderr
+
+
+def test_pushed_objects_import_the_configured_templates(icinga: Icinga2, tmp_path: Path) -> None:
+    domain = fresh_domain_id()
+    config = push_config(tmp_path, icinga, "templates", "1h")
+    section = json.loads(config.read_text(encoding="utf-8"))
+    section["icinga2"].update(host_template="fleet-robot", service_template="fleet-diagnostics")
+    config.write_text(json.dumps(section), encoding="utf-8")
+    with (
+        running_exporter(tmp_path, domain, f"--config.file={config}"),
+        running_simulator(tmp_path, domain, "--robots=1", "--namespace-prefix=tmpl"),
+    ):
+        wait_for(lambda: pushed(icinga, "tmpl1", "ros-diagnostics"), timeout=60, message="the robot's host")
+        assert icinga.objects("hosts")["tmpl1"]["site_contact"] == "robots@example"
+        assert icinga.objects("hosts")["tmpl1"]["overseer_exporter"] == "templates"
+        service_vars = services_of(icinga, "tmpl1")["ros-diagnostics"]
+        assert service_vars["notes_from_template"] == "pushed by overseer"

@@ -312,7 +312,9 @@ class Icinga2Push:
                 "check_interval": FALLBACK_CHECK_INTERVAL,
                 "retry_interval": FALLBACK_CHECK_INTERVAL,
                 "max_check_attempts": 1,
-                "vars": {**self._marks(), **variables},
+                # One attribute per variable, so that the variables of an imported template are kept:
+                # a whole `vars` dictionary would replace them.
+                **{f"vars.{name}": value for name, value in {**self._marks(), **variables}.items()},
             }
         )
 
