@@ -301,3 +301,22 @@ def test_level_events_replay_to_the_models_levels_and_change_counts(arrays: list
         assert mine[-1].new_level is component.level and mine[-1].message == component.message
         assert len(mine) - 1 == component.level_changes  # as ros_diagnostics_level_changes_total counts
         assert all(a.new_level is b.old_level for a, b in itertools.pairwise(mine))
+
+
+def test_a_publisher_that_left_is_a_robot_down_at_the_check_not_after_the_timeout() -> None:
+    fleet = Fleet()
+    fleet.publish("r1", (0, "/a", "fine"))
+    fleet.check()
+    fleet.take()
+    fleet.advance(2)
+    fleet.model.set_publisher_alive("r1", False)  # as Zenoh liveliness reports it
+    fleet.check()
+    [down] = fleet.take()
+    assert (down.kind, down.time, down.message) == (
+        "robot_down",
+        fleet.clock.now,
+        "its diagnostics publisher left",
+    )
+    fleet.model.set_publisher_alive("r1", True)
+    fleet.check()
+    assert [event.kind for event in fleet.take()] == ["robot_up"]

@@ -18,6 +18,7 @@ from zenoh.ext import Int64, UInt8, z_deserialize
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.sources.zenoh_keys import DIAGNOSTIC_ARRAY_HASH, DIAGNOSTIC_ARRAY_TYPE, data_key
+from support.nagios import run_check
 from support.ports import free_port
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.zenoh import (
@@ -43,6 +44,12 @@ def metric(exporter: Exporter, name: str, **labels: str) -> float | None:
 def robot_up(exporter: Exporter, robot: str) -> float | None:
     """`ros_diagnostics_robot_up` of `robot` (None while unknown)."""
     return metric(exporter, "ros_diagnostics_robot_up", robot=robot)
+
+
+def robot_events(exporter: Exporter, robot: str, kind: str) -> list[dict[str, Any]]:
+    """The robot's events of one kind in the exporter's history, newest first."""
+    events: list[dict[str, Any]] = exporter.get_json(f"/api/v1/events?robot={robot}")["events"]
+    return [event for event in events if event["kind"] == kind]
 
 
 def wait_until_heard(
@@ -146,6 +153,8 @@ def test_a_killed_robot_is_down_at_once_through_liveliness_and_up_when_it_return
         with running_exporter(tmp_path, None, *exporter_args(port, "--fleet.robot-timeout=60s")) as exporter:
             wait_until_heard(exporter, "victim1", 15)
             wait_until_heard(exporter, "keeper1", 15)
+            # The event history checks robots once a second: let it see victim1 up before it goes.
+            wait_for(lambda: robot_events(exporter, "victim1", "robot_up"), 10, message="victim1 up event")
             victim.process.send_signal(signal.SIGKILL)
             killed_at = time.monotonic()
             wait_for(lambda: robot_up(exporter, "victim1") == 0.0, 10, interval=0.1, message="victim1 down")
@@ -153,7 +162,13 @@ def test_a_killed_robot_is_down_at_once_through_liveliness_and_up_when_it_return
             assert down_after < 5, f"down after {down_after:.1f}s; the robot timeout is 60s"
             document = exporter.robot("victim1")
             assert document is not None and document["up"] is False and document["level"] == LEVELS["STALE"]
+            assert document["publisher_alive"] is False
             assert robot_up(exporter, "keeper1") == 1.0
+            check = run_check("--url", exporter.url, "-r", "victim1")
+            assert check.output.startswith("UNKNOWN - victim1 is down: its diagnostics publisher left"), check
+            down = wait_for(lambda: robot_events(exporter, "victim1", "robot_down"), 10, message="down event")
+            assert down[0]["message"] == "its diagnostics publisher left"
+            assert down[0]["time"] <= time.time()  # when it left, not last message + robot timeout
             with running_simulator(tmp_path, 0, *victim_args):
                 wait_for(lambda: robot_up(exporter, "victim1") == 1.0, 15, interval=0.1, message="victim1 up")
                 assert exporter.robot("victim1")["level"] == LEVELS["ERROR"]  # type: ignore[index]

@@ -46,7 +46,7 @@ class Component:
 class Robot:
     """One robot as the exporter's JSON API reports it."""
 
-    __slots__ = ("components", "generated_at", "last_message", "name", "up")
+    __slots__ = ("components", "generated_at", "last_message", "name", "publisher_alive", "up")
 
     def __init__(
         self,
@@ -55,8 +55,10 @@ class Robot:
         last_message: float | None,
         generated_at: float,
         components: list[Component],
+        publisher_alive: bool = True,
     ) -> None:
         """Keep the fields; times are the exporter's unix times."""
+        self.publisher_alive = publisher_alive
         self.name = name
         self.up = up
         self.last_message = last_message
@@ -96,6 +98,8 @@ def robot_from_document(document: object) -> Robot:
         last_message=None if last_message is None else number_field(document, "last_message"),
         generated_at=number_field(document, "generated_at"),
         components=[component_from_document(item) for item in list_field(document, "components")],
+        # Absent from exporters before Zenoh liveliness: their robots' publishers count as alive.
+        publisher_alive="publisher_alive" not in document or flag_field(document, "publisher_alive"),
     )
 
 
@@ -196,7 +200,9 @@ def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
 
 
 def down_text(robot: Robot) -> str:
-    """Why a robot is down: silent for how long, or never heard from."""
+    """Why a robot is down: its publisher left, silent for how long, or never heard from."""
+    if not robot.publisher_alive:
+        return "its diagnostics publisher left (the middleware's liveliness says so)"
     if robot.last_message is None:
         return "the exporter knows it but never received its diagnostics"
     silent_seconds = max(0, round(robot.generated_at - robot.last_message))

@@ -80,7 +80,8 @@ class TransitionDetector:
         for robot in snapshot.robots:
             before = seen.get(robot.name)
             last = robot.last_message
-            up = last is not None and taken_at - last <= timeout  # as snapshot.robot_up, inlined
+            # as snapshot.robot_up, inlined
+            up = robot.publisher_alive and last is not None and taken_at - last <= timeout
             if before is None:
                 before = seen[robot.name] = _Seen(False, False, _NONE, {}, _NONE)
             elif up is before.up and not robot.missing and not before.missing:
@@ -109,14 +110,19 @@ class TransitionDetector:
         name = robot.name
         last = robot.last_message if robot.last_message is not None else snapshot.taken_at
         if before.up and not up:
+            left = not robot.publisher_alive  # the transport saw its publisher go: down now, not later
             events.append(
                 Event(
-                    last + limits.robot_timeout,
+                    min(snapshot.taken_at, last + limits.robot_timeout)
+                    if left
+                    else last + limits.robot_timeout,
                     name,
                     "robot_down",
                     old_level=_reported_worst(robot.components),  # unchanged since it went silent
                     new_level=Level.STALE,
-                    message=f"no diagnostics received for {limits.robot_timeout:g} s",
+                    message="its diagnostics publisher left"
+                    if left
+                    else f"no diagnostics received for {limits.robot_timeout:g} s",
                 )
             )
         elif up and not before.up:

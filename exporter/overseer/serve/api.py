@@ -59,6 +59,7 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
         "level": int(level),
         "state": level.name,
         "up": up,
+        "publisher_alive": robot.publisher_alive,
         "last_message": robot.last_message,
         "transport": robot.transport,
         "components": len(robot.components),
