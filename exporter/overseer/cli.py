@@ -379,10 +379,6 @@ def _zenoh_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return overrides
 
 
-def _configure_logging(level: str, log_format: str = "text") -> None:
-    configure_logging(level, log_format)
-
-
 def _wait_for_signal() -> None:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -393,7 +389,7 @@ def _wait_for_signal() -> None:
 
 def _run(args: argparse.Namespace) -> int:
     config = load_config(args.config_file, _exporter_overrides(args))
-    _configure_logging(config.log_level, config.log_format)
+    configure_logging(config.log_level, config.log_format)
     from overseer.app import Exporter
 
     try:
@@ -453,7 +449,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
 
 def _simulate(args: argparse.Namespace) -> int:
     settings = _simulator_settings(args)
-    _configure_logging(args.log_level)
+    configure_logging(args.log_level)
     from overseer.simulator.publisher import EventError, FleetSimulator
 
     try:
@@ -508,7 +504,7 @@ def _demo(args: argparse.Namespace) -> int:
             "log_level": args.log_level,
         },
     )
-    _configure_logging(config.log_level)
+    configure_logging(config.log_level)
     from overseer.app import Exporter
     from overseer.simulator.publisher import FleetSimulator, SimulatorSettings, parse_event
 

@@ -647,5 +647,15 @@ def _list(value: object, key: str) -> list[Any]:
     return value
 
 
+def read_text_file(path: str | Path, key: str) -> str:
+    """The UTF-8 text of the file `key` names; ConfigError naming the key when it cannot be read."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{key}: cannot read {str(path)!r}: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{key}: {str(path)!r} is not UTF-8 text") from None
+
+
 def _first_line(error: Exception) -> str:
     return " ".join(str(error).split())

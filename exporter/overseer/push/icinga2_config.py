@@ -9,10 +9,9 @@ from __future__ import annotations
 import re
 import ssl
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from overseer.config import ConfigError, parse_duration
+from overseer.config import ConfigError, parse_duration, read_text_file
 
 SERVICE_KINDS = ("robot", "groups")
 _KEYS = {
@@ -145,12 +144,7 @@ def _services(value: object) -> tuple[str, ...]:
 
 
 def _read_secret(path: str) -> str:
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"icinga2.password_file: cannot read {path!r}: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"icinga2.password_file: {path!r} is not UTF-8 text") from None
+    text = read_text_file(path, "icinga2.password_file")
     password = text.splitlines()[0] if text else ""
     if not password:
         raise ConfigError(f"icinga2.password_file: {path!r} is empty")  # never echo the content

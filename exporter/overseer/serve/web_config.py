@@ -24,7 +24,7 @@ from typing import Any
 import bcrypt
 import yaml
 
-from overseer.config import ConfigError
+from overseer.config import ConfigError, read_text_file
 
 REALM = "overseer"
 
@@ -115,12 +115,7 @@ def load_web_config(path: str | Path | None) -> WebSecurity:
     """Read and validate the web config file at `path` (None: plain HTTP, no auth); ConfigError if bad."""
     if path is None:
         return WebSecurity()
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"web.config_file: cannot read {str(path)!r}: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"web.config_file: {str(path)!r} is not UTF-8 text") from None
+    text = read_text_file(path, "web.config_file")
     try:
         raw = yaml.safe_load(text)
     except (yaml.YAMLError, ValueError, RecursionError) as error:  # also huge integers, deep nesting
