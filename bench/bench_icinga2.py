@@ -74,10 +74,12 @@ def exporter(overrides: dict[str, object], config_file: Path | None, robots: int
             "fleet.stale_after": "1d",
             "fleet.robot_timeout": "1d",
             "fleet.expire_after": "2d",
+            "ingest.workers": 1,  # the benchmark fills the in-process model
             **overrides,
         },
     )
     running = Exporter(config)
+    assert running.model is not None
     for index in range(1, robots + 1):
         running.model.apply(f"robot{index}", robot_array(index), "dds")
     return running

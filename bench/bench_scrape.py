@@ -21,6 +21,7 @@ from bench.common import Row, emit
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 from overseer.serve.metrics import FleetCollector
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
@@ -65,7 +66,7 @@ def measure(series_wanted: int) -> list[Row]:
     registry = CollectorRegistry()
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
     registry.register(FleetCollector(model, re.compile(".*"), ["dds"]))
-    server = OverseerServer(("127.0.0.1", 0), model, registry, exposition)
+    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition), registry)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     series = exposition.render().count(b"\n") - 34
 

@@ -26,6 +26,7 @@ from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from overseer.sources.ingest import PayloadIngest
@@ -83,7 +84,7 @@ def measure(browser: Browser, robots: int) -> dict[str, float]:
     model = FleetModel(FleetLimits(max_robots=100_000, stale_after=3600, robot_timeout=3600))
     fill(model, robots)
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
-    server = OverseerServer(("127.0.0.1", 0), model, CollectorRegistry(), exposition)
+    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition), CollectorRegistry())
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         figures = {

@@ -25,6 +25,7 @@ from overseer.serve.api import (
     robots_document,
 )
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 
 
@@ -179,7 +180,7 @@ def server(fleet: tuple[FleetModel, ManualClock]) -> Iterator[OverseerServer]:
     """The real HTTP server over the fleet, on a free loopback port."""
     model = fleet[0]
     exposition = FleetExposition(model, re.compile(".*"), ["dds"])
-    server = OverseerServer(("127.0.0.1", 0), model, CollectorRegistry(), exposition)
+    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition), CollectorRegistry())
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:

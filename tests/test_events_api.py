@@ -32,6 +32,7 @@ def exporter(tmp_path: Path, **sections: Any) -> Iterator[Exporter]:
         "dds": {"enabled": False},
         "web": {"listen_address": f"127.0.0.1:{free_port()}"},
         "events": {"path": str(tmp_path / "events.db")},
+        "ingest": {"workers": 1},  # the tests feed the in-process model
     }
     for name, section in sections.items():
         raw[name] = {**raw.get(name, {}), **section}
@@ -47,6 +48,7 @@ def publish(running: Exporter, robot: str, *statuses: tuple[int, str, str]) -> N
     array = DiagnosticArray(
         0, 0, "", tuple(DiagnosticStatus(lv, n, m, "hw", (("k", m),)) for lv, n, m in statuses)
     )
+    assert running.model is not None
     running.model.apply(robot, array, "dds")
     assert running.history is not None
     running.history.store.flush()
@@ -189,7 +191,7 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
     with exporter(tmp_path) as running:
         publish(running, "robot1", (0, "/a", "ok"), (1, "/b", "warm"))
         publish(running, "robot1", (2, "/a", "bad"), (1, "/b", "warm"))
-        fast = running.server.exposition.render()
+        fast = running.server.view.metrics_text()
         reference = generate_latest(running.server.registry)
     assert fast == reference
     text = fast.decode()

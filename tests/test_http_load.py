@@ -29,6 +29,7 @@ import overseer.serve.http
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import (
     MAX_CONCURRENT_REQUESTS,
     MAX_CONNECTIONS,
@@ -217,7 +218,9 @@ def in_process_server(robots: int) -> Iterator[OverseerServer]:
     registry = CollectorRegistry()
     pattern = re.compile(".*")
     registry.register(FleetCollector(model, pattern, ["dds"]))
-    server = OverseerServer(("127.0.0.1", 0), model, registry, FleetExposition(model, pattern, ["dds"]))
+    server = OverseerServer(
+        ("127.0.0.1", 0), ModelView(model, FleetExposition(model, pattern, ["dds"])), registry
+    )
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:

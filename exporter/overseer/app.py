@@ -1,25 +1,29 @@
-"""The exporter process: a fleet model fed by the transports and served over HTTP."""
+"""The exporter process: a fleet model (or ingest workers each holding part of it) served over HTTP."""
 
 from __future__ import annotations
 
 import logging
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from prometheus_client.registry import Collector, CollectorRegistry
 
 from overseer.codec import compiled
 from overseer.config import Config
-from overseer.history.service import EventHistory
+from overseer.history.service import EventHistory, TransitionWatch
 from overseer.model import FleetModel
 from overseer.push.icinga2_metrics import PushCollector
-from overseer.push.icinga2_push import Icinga2Push
-from overseer.serve.exposition import FleetExposition
+from overseer.push.icinga2_push import FleetSource, Icinga2Push
+from overseer.serve.exposition import ExpositionAssembler, FleetExposition
+from overseer.serve.fleet_view import FleetView, ModelView
 from overseer.serve.http import OverseerServer
 from overseer.serve.message_labels import MessageLabels
 from overseer.serve.metrics import FleetCollector
 from overseer.serve.web_config import load_web_config
-from overseer.sources import Source
+from overseer.sources import Source, build_sources, enabled_transports
+from overseer.workers.metrics import WorkerPoolCollector
+from overseer.workers.pool import WorkerPool
+from overseer.workers.view import PooledCollector, PooledSnapshots, PooledView
 
 log = logging.getLogger(__name__)
 
@@ -28,63 +32,83 @@ EXPIRY_INTERVAL_SECONDS = 1.0
 
 @dataclass
 class Exporter:
-    """The running parts of one exporter; `start` brings them up, `stop` takes them down."""
+    """The running parts of one exporter; `start` brings them up, `stop` takes them down.
+
+    With one ingest worker the transports feed `model` in this process; with more, `pool` runs them in
+    worker processes and `model` is None.
+    """
 
     config: Config
-    model: FleetModel = field(init=False)
+    model: FleetModel | None = field(init=False, default=None)
     server: OverseerServer = field(init=False)
     sources: list[Source] = field(default_factory=list)
     history: EventHistory | None = None
     icinga2_push: Icinga2Push | None = None
+    pool: WorkerPool | None = None
+    _watch: TransitionWatch | None = None
     _stopping: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
-        self.model = FleetModel(self.config.fleet)
-        if self.config.dds.enabled:
-            from overseer.sources.dds import DdsSource
-
-            self.sources.append(DdsSource(self.config.dds, self.model, self.config.shard))
-        if self.config.ros1.enabled:
-            from overseer.sources.ros1 import Ros1Source
-
-            robots = tuple(robot for robot in self.config.ros1.robots if self.config.shard.owns(robot.name))
-            self.sources.append(Ros1Source(replace(self.config.ros1, robots=robots), self.model))
-        if self.config.zenoh.enabled:
-            from overseer.sources.zenoh import ZenohSource
-
-            self.sources.append(ZenohSource(self.config.zenoh, self.model, self.config.shard))
+        config = self.config
+        if config.events.enabled:
+            self.history = EventHistory(config.events, config.log_format == "json")
         registry = CollectorRegistry(auto_describe=True)
-        transports = [source.transport for source in self.sources]
-        value_keys = self.config.metrics.value_key_pattern
-        metrics, external_url = self.config.metrics, self.config.web.external_url
+        transports = enabled_transports(config)
+        metrics, external_url = config.metrics, config.web.external_url
         messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
-        registry.register(
-            FleetCollector(self.model, value_keys, transports, messages=messages, external_url=external_url)
-        )
-        extra_collectors: list[Collector] = []
-        if self.config.events.enabled:
-            self.history = EventHistory(self.config.events, self.model, self.config.log_format == "json")
-            extra_collectors.append(self.history.collector)
-        if self.config.icinga2 is not None:
-            self.icinga2_push = Icinga2Push(self.config.icinga2, self.model, self.config.fleet.expire_after)
+        extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
+        fleet: FleetSource
+        if config.ingest.workers == 1:
+            model = self.model = FleetModel(config.fleet)
+            self.sources = build_sources(config, model)
+            if self.history is not None:
+                self._watch = TransitionWatch(model, self.history.store.add)
+            registry.register(
+                FleetCollector(
+                    model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
+                )
+            )
+            fleet = model
+        else:
+            self.pool = WorkerPool(config, None if self.history is None else self.history.store.add)
+            registry.register(PooledCollector(self.pool))
+            extra_collectors.append(WorkerPoolCollector(self.pool))
+            fleet = PooledSnapshots(self.pool)
+        if config.icinga2 is not None:
+            self.icinga2_push = Icinga2Push(config.icinga2, fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
         for collector in extra_collectors:
             registry.register(collector)
-        exposition = FleetExposition(
-            self.model, value_keys, transports, extra_collectors, messages=messages, external_url=external_url
-        )
-        security = load_web_config(self.config.web.config_file)
-        address = self.config.web.host_and_port
-        self.server = OverseerServer(address, self.model, registry, exposition, security)
+        view: FleetView
+        if self.model is not None:
+            exposition = FleetExposition(
+                self.model,
+                metrics.value_key_pattern,
+                transports,
+                extra_collectors,
+                messages=messages,
+                external_url=external_url,
+            )
+            view = ModelView(self.model, exposition)
+        else:
+            assert self.pool is not None
+            view = PooledView(self.pool, ExpositionAssembler(transports, extra_collectors, external_url))
+        security = load_web_config(config.web.config_file)
+        self.server = OverseerServer(config.web.host_and_port, view, registry, security)
         self.server.events = self.history.store if self.history is not None else None
 
     def start(self) -> None:
-        """Start the transports, the expiry timer and the HTTP server threads."""
+        """Start the transports (or workers), the expiry timer and the HTTP server threads."""
         if self.history is not None:
-            self.history.start()  # before the transports, so that it sees their first messages
+            self.history.start()
+        if self._watch is not None:
+            self._watch.start()  # before the transports, so that it sees their first messages
         for source in self.sources:
             source.start()
-        threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
+        if self.pool is not None:
+            self.pool.start()
+        else:
+            threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
         if compiled.enabled:
@@ -103,10 +127,15 @@ class Exporter:
         self.server.server_close()
         for source in self.sources:
             source.stop()
+        if self.pool is not None:
+            self.pool.stop()
+        if self._watch is not None:
+            self._watch.stop()
         if self.history is not None:
             self.history.stop()
 
     def _expire_loop(self) -> None:
+        assert self.model is not None
         while not self._stopping.wait(EXPIRY_INTERVAL_SECONDS):
             for robot in self.model.expire():
                 log.info("forgot robot %s after %gs of silence", robot, self.config.fleet.expire_after)

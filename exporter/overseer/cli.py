@@ -158,6 +158,13 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         metavar="I/N",
         help="follow only the robots whose name hashes to shard I of N (default 0/1)",
     )
+    parser.add_argument(
+        "--ingest.workers",
+        dest="ingest_workers",
+        metavar="N",
+        help="worker processes sharing the ingest, each following its own robots "
+        "(default: one per core, at most 16; 1 ingests in the exporter's process)",
+    )
     parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
@@ -318,6 +325,8 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
     overrides.update(_zenoh_overrides(args))
     if args.shard is not None:
         overrides["shard"] = args.shard
+    if args.ingest_workers is not None:
+        overrides["ingest.workers"] = args.ingest_workers
     if args.log_level is not None:
         overrides["log_level"] = args.log_level
     overrides.update(_event_overrides(args))

@@ -5,6 +5,7 @@ Every error names the offending key and value, so the CLI can fail with one read
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -166,6 +167,26 @@ class EventsConfig:
     max_size: int = 1_000_000_000  # bytes
 
 
+MAX_INGEST_WORKERS = 64
+DEFAULT_INGEST_WORKERS_CAP = 16
+
+
+def default_ingest_workers() -> int:
+    """One ingest worker per core this process may run on, at most `DEFAULT_INGEST_WORKERS_CAP`."""
+    try:
+        cores = len(os.sched_getaffinity(0))  # honours taskset and cpusets, unlike cpu_count
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, DEFAULT_INGEST_WORKERS_CAP))
+
+
+@dataclass(frozen=True)
+class IngestConfig:
+    """How many worker processes share the ingest; 1 runs it in the exporter's own process."""
+
+    workers: int = field(default_factory=default_ingest_workers)
+
+
 @dataclass(frozen=True)
 class Config:
     """The whole configuration."""
@@ -177,6 +198,7 @@ class Config:
     fleet: FleetLimits = field(default_factory=FleetLimits)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
     log_level: str = "info"
     events: EventsConfig = field(default_factory=EventsConfig)
     log_format: str = "text"
@@ -311,6 +333,7 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
             "fleet",
             "metrics",
             "shard",
+            "ingest",
             "log_level",
             "events",
             "log_format",
@@ -345,6 +368,9 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
     )
     if "shard" in raw:
         config = replace(config, shard=parse_shard(raw["shard"]))
+    ingest = _section(raw, "ingest", {"workers"})
+    if ingest.get("workers") is not None:
+        config = replace(config, ingest=IngestConfig(_ingest_workers(ingest["workers"])))
     if "log_level" in raw:
         level = _string(raw["log_level"], "log_level").lower()
         if level not in _LOG_LEVELS:
@@ -364,6 +390,16 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
 
         config = replace(config, icinga2=icinga2_config(raw["icinga2"]))
     return config
+
+
+def _ingest_workers(value: object) -> int:
+    if isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_INGEST_WORKERS:
+        raise ConfigError(
+            f"ingest.workers: expected a whole number from 1 to {MAX_INGEST_WORKERS}, got {value!r}"
+        )
+    return value
 
 
 def _events_config(raw: dict[str, Any]) -> EventsConfig:

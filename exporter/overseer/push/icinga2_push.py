@@ -14,9 +14,9 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
-from overseer.model import FleetModel, FleetSnapshot
+from overseer.model import FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
 from overseer.push.icinga2_config import Icinga2Config
 from overseer.push.icinga2_metrics import PushStats
@@ -34,13 +34,21 @@ HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: 
 FALLBACK_CHECK_INTERVAL = 86400.0
 
 
+class FleetSource(Protocol):
+    """Where the push reads the fleet: the model, or the view joining the ingest workers' models."""
+
+    def snapshot(self) -> FleetSnapshot:
+        """The whole fleet now."""
+        ...
+
+
 class Icinga2Push:
     """Keeps Icinga 2's hosts and services in step with the fleet model."""
 
     def __init__(
         self,
         config: Icinga2Config,
-        model: FleetModel,
+        model: FleetSource,
         expire_after: float,
         stats: PushStats | None = None,
         clock: Callable[[], float] = time.monotonic,

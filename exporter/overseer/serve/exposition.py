@@ -11,7 +11,8 @@ import bisect
 import re
 import threading
 from array import array
-from collections.abc import Callable, Iterable
+from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -79,31 +80,23 @@ class FleetExposition:
         history's, the Icinga 2 push's) are rendered by prometheus-client and appended after the fleet:
         what a registry with the fleet's collector first, then them, renders.
         """
-        self._extra = CollectorRegistry(auto_describe=False)
-        for collector in extra_collectors:
-            self._extra.register(collector)
+        self.assembler = ExpositionAssembler(transports, extra_collectors, external_url)
         self._model = model
         self._value_keys = value_keys
-        self._transports = tuple(transports)
         self._messages = messages
-        self._web_info = (
-            ""
-            if external_url is None
-            else f'overseer_web_info{{external_url="{escape_label_value(external_url)}"}} 1.0\n'
-        )
-        self._headers = {
-            metric.name: _header(metric.name, metric.type, metric.documentation)
-            for metric in _Families.create().all()
-        }
         self._robots: dict[str, _RobotLines] = {}
         self._lock = threading.Lock()
 
     def render(self) -> bytes:
         """The exposition of the fleet now."""
+        return self.assembler.assemble([self.render_part()])
+
+    def render_part(self) -> ExpositionPart:
+        """The model's series and counters, for an assembler to join with other models' (workers')."""
         with self._lock:
             return self._render(self._model.snapshot())
 
-    def _render(self, snapshot: FleetSnapshot) -> bytes:
+    def _render(self, snapshot: FleetSnapshot) -> ExpositionPart:
         render = _RenderCache(NumericValues(self._value_keys), self._messages)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
@@ -127,21 +120,97 @@ class FleetExposition:
                     f"{go_float(robot.last_message)}\n"
                 )
         self._robots = current
+        return ExpositionPart(
+            len(current),
+            (
+                b"".join(levels),
+                "".join(robot_level).encode(),
+                "".join(robot_up).encode(),
+                "".join(last_message).encode(),
+                b"".join(changes),
+                b"".join(values),
+                b"".join(messages),
+            ),
+            dict(snapshot.message_counts),
+            dict(snapshot.dropped_statuses),
+            snapshot.truncated_strings,
+            dict(snapshot.source_errors),
+        )
+
+
+# The per-robot and per-component families, in exposition order: an `ExpositionPart` holds their lines.
+FLEET_FAMILIES = (
+    "ros_diagnostics_level",
+    "ros_diagnostics_robot_level",
+    "ros_diagnostics_robot_up",
+    "ros_diagnostics_robot_last_message_timestamp_seconds",
+    "ros_diagnostics_level_changes",
+    "ros_diagnostics_value",
+    "ros_diagnostics_status_message",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class ExpositionPart:
+    """The rendered series of one model (a worker's robots): lines per fleet family, and its counters."""
+
+    robots: int
+    families: tuple[bytes, ...]  # the lines of each of FLEET_FAMILIES, without the header
+    message_counts: dict[tuple[str, str], int]
+    dropped_statuses: dict[str, int]
+    truncated_strings: int
+    source_errors: dict[tuple[str, str], int]
+
+
+class ExpositionAssembler:
+    """Joins parts (one per worker, robots disjoint) into one exposition; counters are summed."""
+
+    def __init__(
+        self,
+        transports: Iterable[str],
+        extra_collectors: Iterable[Collector] = (),
+        external_url: str | None = None,
+    ) -> None:
+        """Add zero message counts for `transports`, then append `extra_collectors` and the web info."""
+        self._extra = CollectorRegistry(auto_describe=False)
+        for collector in extra_collectors:
+            self._extra.register(collector)
+        self._transports = tuple(transports)
+        self._web_info = (
+            ""
+            if external_url is None
+            else f'overseer_web_info{{external_url="{escape_label_value(external_url)}"}} 1.0\n'
+        )
+        self._headers = {
+            metric.name: _header(metric.name, metric.type, metric.documentation)
+            for metric in _Families.create().all()
+        }
+
+    def assemble(self, parts: Sequence[ExpositionPart]) -> bytes:
+        """The whole exposition: each family's header, then every part's lines of it; then the counters."""
         headers = self._headers
+        message_totals: Counter[tuple[str, str]] = Counter()
+        dropped: Counter[str] = Counter()
+        errors: Counter[tuple[str, str]] = Counter()
+        for part in parts:
+            message_totals.update(part.message_counts)
+            dropped.update(part.dropped_statuses)
+            errors.update(part.source_errors)
+        truncated = sum(part.truncated_strings for part in parts)
         tail = [headers["overseer_messages"]]
-        for (transport, result), count in message_counts(snapshot, self._transports):
+        for (transport, result), count in message_counts(message_totals, self._transports):
             tail.append(
                 f'overseer_messages_total{{result="{escape_label_value(result)}",'
                 f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
             )
         tail.append(headers["overseer_statuses_dropped"])
         for reason in DROP_REASONS:
-            dropped = float(snapshot.dropped_statuses.get(reason, 0))
-            tail.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {go_float(dropped)}\n')
+            dropped_count = go_float(float(dropped[reason]))
+            tail.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {dropped_count}\n')
         tail.append(headers["overseer_strings_truncated"])
-        tail.append(f"overseer_strings_truncated_total {go_float(float(snapshot.truncated_strings))}\n")
+        tail.append(f"overseer_strings_truncated_total {go_float(float(truncated))}\n")
         tail.append(headers["overseer_source_errors"])
-        for (transport, reason), count in sorted(snapshot.source_errors.items()):
+        for (transport, reason), count in sorted(errors.items()):
             tail.append(
                 f'overseer_source_errors_total{{reason="{escape_label_value(reason)}",'
                 f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
@@ -153,25 +222,13 @@ class FleetExposition:
         )
         tail.append(headers["overseer_web_info"])
         tail.append(self._web_info)
-        return b"".join(
-            [
-                headers["ros_diagnostics_level"].encode(),
-                *levels,
-                (headers["ros_diagnostics_robot_level"] + "".join(robot_level)).encode(),
-                (headers["ros_diagnostics_robot_up"] + "".join(robot_up)).encode(),
-                (
-                    headers["ros_diagnostics_robot_last_message_timestamp_seconds"] + "".join(last_message)
-                ).encode(),
-                headers["ros_diagnostics_level_changes"].encode(),
-                *changes,
-                headers["ros_diagnostics_value"].encode(),
-                *values,
-                headers["ros_diagnostics_status_message"].encode(),
-                *messages,
-                "".join(tail).encode(),
-                generate_latest(self._extra),  # joined here, not appended: no copy of the whole body
-            ]
-        )
+        body: list[bytes] = []
+        for index, family in enumerate(FLEET_FAMILIES):
+            body.append(headers[family].encode())
+            body.extend(part.families[index] for part in parts)
+        body.append("".join(tail).encode())
+        body.append(generate_latest(self._extra))  # joined here, not appended: no copy of the whole body
+        return b"".join(body)
 
 
 def _lines_for(

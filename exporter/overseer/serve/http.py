@@ -29,16 +29,9 @@ from prometheus_client.registry import CollectorRegistry
 
 from overseer.history.query import QueryError, parse_event_query
 from overseer.history.store import EventStore, EventsUnavailable
-from overseer.model import FleetModel
-from overseer.serve.api import (
-    ComponentQueryError,
-    components_document,
-    parse_component_query,
-    robot_document,
-    robots_document,
-)
+from overseer.serve.api import ComponentQueryError, parse_component_query
 from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
-from overseer.serve.exposition import FleetExposition
+from overseer.serve.fleet_view import FleetView
 from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
@@ -61,7 +54,7 @@ _NOT_TLS_ANSWER = (
 
 
 class OverseerServer(ThreadingHTTPServer):
-    """A threading HTTP server that serves one fleet model and one registry."""
+    """A threading HTTP server that serves one fleet view and one registry."""
 
     daemon_threads = True
     events: EventStore | None = None  # the event history, when enabled
@@ -71,17 +64,18 @@ class OverseerServer(ThreadingHTTPServer):
     def __init__(
         self,
         address: tuple[str, int],
-        model: FleetModel,
+        view: FleetView,
         registry: CollectorRegistry,
-        exposition: FleetExposition,
         security: WebSecurity | None = None,
     ) -> None:
-        """Bind to `address` ('' host for every interface; IPv6 when the host has a colon)."""
+        """Bind to `address` ('' host for every interface; IPv6 when the host has a colon).
+
+        `/metrics` in the text format and the API read `view`; OpenMetrics is rendered from `registry`.
+        """
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
-        self.model = model
+        self.view = view
         self.registry = registry
-        self.exposition = exposition
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -260,7 +254,7 @@ class _Handler(BaseHTTPRequestHandler):
         elif path == "/-/healthy" or path == "/-/ready":
             self._send(200, b"OK\n", "text/plain; charset=utf-8", head_only)
         elif path == ROBOTS_PATH or path == ROBOTS_PATH + "/":
-            self._json(200, robots_document(self.server.model.snapshot()), head_only)
+            self._json(200, self.server.view.robots_document(), head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
         elif path == COMPONENTS_PATH:
@@ -280,12 +274,11 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(404, {"error": f"no such path {path!r}"}, head_only)
 
     def _robot(self, name: str, head_only: bool) -> None:
-        snapshot = self.server.model.snapshot()
-        robot = snapshot.find(name)
-        if robot is None:
+        document = self.server.view.robot_document(name)
+        if document is None:
             self._json(404, {"error": f"unknown robot {name!r}"}, head_only)
         else:
-            self._json(200, robot_document(snapshot, robot), head_only)
+            self._json(200, document, head_only)
 
     def _components(self, head_only: bool) -> None:
         try:
@@ -293,7 +286,7 @@ class _Handler(BaseHTTPRequestHandler):
         except ComponentQueryError as error:
             self._json(400, {"error": str(error)}, head_only)
             return
-        self._json(200, components_document(self.server.model.snapshot(), query), head_only)
+        self._json(200, self.server.view.components_document(query), head_only)
 
     def _events(self, query_string: str, head_only: bool) -> None:
         store = self.server.events
@@ -315,7 +308,7 @@ class _Handler(BaseHTTPRequestHandler):
             encoder, content_type = choose_encoder(accept)
             body = encoder(self.server.registry)
         else:
-            body, content_type = self.server.exposition.render(), EXPOSITION_CONTENT_TYPE
+            body, content_type = self.server.view.metrics_text(), EXPOSITION_CONTENT_TYPE
         self._send(200, body, content_type, head_only, compressible=True)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:

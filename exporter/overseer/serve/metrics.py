@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, fields
 
 from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamily, Metric
@@ -93,7 +93,7 @@ class FleetCollector(Collector):
                 families.value.add_metric(list(value_labels), sample)
             for message_labels in samples.messages:
                 families.status_message.add_metric(list(message_labels), 1.0)
-        for (transport, result), count in message_counts(snapshot, self._transports):
+        for (transport, result), count in message_counts(snapshot.message_counts, self._transports):
             families.messages.add_metric([transport, result], float(count))
         for reason in DROP_REASONS:
             families.dropped.add_metric([reason], float(snapshot.dropped_statuses.get(reason, 0)))
@@ -161,9 +161,11 @@ def robot_samples(
     return samples
 
 
-def message_counts(snapshot: FleetSnapshot, transports: Iterable[str]) -> list[tuple[tuple[str, str], int]]:
+def message_counts(
+    counted: Mapping[tuple[str, str], int], transports: Iterable[str]
+) -> list[tuple[tuple[str, str], int]]:
     """Message counts by (transport, result), with zeros for every result of the active transports."""
-    counts = dict(snapshot.message_counts)
+    counts = dict(counted)
     for transport in transports:
         for result in MESSAGE_RESULTS:
             counts.setdefault((transport, result), 0)

@@ -1,6 +1,13 @@
 """Transports: each subscribes to robots' diagnostics and hands them to the fleet model."""
 
-from typing import Protocol
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from overseer.config import Config
+    from overseer.model import FleetModel
 
 
 class Source(Protocol):
@@ -13,3 +20,28 @@ class Source(Protocol):
 
     def stop(self) -> None:
         """Stop receiving and release connections."""
+
+
+def enabled_transports(config: Config) -> list[str]:
+    """The names of the transports `config` enables, in the order `build_sources` creates them."""
+    enabled = [("dds", config.dds.enabled), ("ros1", config.ros1.enabled), ("zenoh", config.zenoh.enabled)]
+    return [name for name, on in enabled if on]
+
+
+def build_sources(config: Config, model: FleetModel) -> list[Source]:
+    """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started."""
+    sources: list[Source] = []
+    if config.dds.enabled:
+        from overseer.sources.dds import DdsSource
+
+        sources.append(DdsSource(config.dds, model, config.shard))
+    if config.ros1.enabled:
+        from overseer.sources.ros1 import Ros1Source
+
+        robots = tuple(robot for robot in config.ros1.robots if config.shard.owns(robot.name))
+        sources.append(Ros1Source(replace(config.ros1, robots=robots), model))
+    if config.zenoh.enabled:
+        from overseer.sources.zenoh import ZenohSource
+
+        sources.append(ZenohSource(config.zenoh, model, config.shard))
+    return sources

@@ -1,0 +1,56 @@
+"""What the HTTP endpoint reads: the fleet's exposition and API documents, from one model or from workers."""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from overseer.model import FleetModel
+from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
+from overseer.serve.exposition import FleetExposition
+
+
+class FleetView(Protocol):
+    """The whole fleet as the endpoint serves it, however many processes hold it."""
+
+    def metrics_text(self) -> bytes:
+        """The Prometheus text exposition of the whole fleet."""
+        ...
+
+    def robots_document(self) -> dict[str, Any]:
+        """GET /api/v1/robots."""
+        ...
+
+    def robot_document(self, name: str) -> dict[str, Any] | None:
+        """GET /api/v1/robots/<name>, or None for a robot nobody follows."""
+        ...
+
+    def components_document(self, query: ComponentQuery) -> dict[str, Any]:
+        """GET /api/v1/components."""
+        ...
+
+
+class ModelView:
+    """The fleet held by one model in this process (one ingest worker, the exporter itself)."""
+
+    def __init__(self, model: FleetModel, exposition: FleetExposition) -> None:
+        """Serve `model`, rendering its metrics with `exposition`."""
+        self.model = model
+        self.exposition = exposition
+
+    def metrics_text(self) -> bytes:
+        """The exposition of the model."""
+        return self.exposition.render()
+
+    def robots_document(self) -> dict[str, Any]:
+        """Every robot's summary."""
+        return robots_document(self.model.snapshot())
+
+    def robot_document(self, name: str) -> dict[str, Any] | None:
+        """One robot with every component, or None."""
+        snapshot = self.model.snapshot()
+        robot = snapshot.find(name)
+        return None if robot is None else robot_document(snapshot, robot)
+
+    def components_document(self, query: ComponentQuery) -> dict[str, Any]:
+        """The components matching `query`."""
+        return components_document(self.model.snapshot(), query)

@@ -1,0 +1,235 @@
+"""The ingest workers of one exporter: started, asked, watched, and restarted when one dies.
+
+Workers are started with `spawn`, not `fork`: the exporter runs threads, and a forked copy of a thread
+holding a lock (logging's, Cyclone's) would wait on it forever.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
+from typing import Any
+
+from overseer.config import Config
+from overseer.history.events import Event
+from overseer.workers.process import FAILED, READY, run_worker
+
+log = logging.getLogger(__name__)
+
+START_TIMEOUT_SECONDS = 60.0
+ANSWER_TIMEOUT_SECONDS = 30.0  # a worker that takes longer to answer is taken for hung and restarted
+SUPERVISE_INTERVAL_SECONDS = 0.2
+RESTART_DELAY_SECONDS = 1.0  # at most one restart a second per worker, so a crashing one cannot spin
+
+EventSink = Callable[[list[Event]], None]
+
+
+class WorkerStartError(RuntimeError):
+    """A worker could not start (a bad DDS or Zenoh configuration, say); the message says why."""
+
+
+@dataclass
+class _Handle:
+    """One worker's process and pipes; replaced whole when the worker is restarted."""
+
+    index: int
+    process: BaseProcess
+    requests: Connection
+    events: Connection
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    ready: bool = False
+
+
+class WorkerPool:
+    """Runs `config.ingest.workers` workers; each follows the robots of its own part of the shard."""
+
+    def __init__(self, config: Config, events: EventSink | None = None) -> None:
+        """Prepare the workers of `config`; `events` receives every worker's events (None: dropped)."""
+        self.config = config
+        self.count = config.ingest.workers
+        self.restarts = [0] * self.count
+        self._events = events
+        self._context = multiprocessing.get_context("spawn")
+        self._handles: list[_Handle | None] = [None] * self.count
+        self._died_at = [0.0] * self.count
+        self._restarted_at = [float("-inf")] * self.count
+        self._stopping = threading.Event()
+        self._supervisor: threading.Thread | None = None
+
+    def start(self) -> None:
+        """Start every worker and wait until each follows its robots; `WorkerStartError` if one cannot."""
+        started = [self._spawn(index) for index in range(self.count)]
+        for handle in started:
+            self._await_ready(handle)
+        self._supervisor = threading.Thread(target=self._supervise, name="ingest-supervisor", daemon=True)
+        self._supervisor.start()
+        log.info("ingesting with %d worker processes", self.count)
+
+    def stop(self) -> None:
+        """Stop the workers: they leave their transports when their request pipe closes."""
+        self._stopping.set()
+        if self._supervisor is not None:
+            self._supervisor.join(timeout=5)
+        handles = [handle for handle in self._handles if handle is not None]
+        for handle in handles:
+            with handle.lock:
+                handle.requests.close()
+        deadline = time.monotonic() + 5
+        for handle in handles:
+            handle.process.join(timeout=max(0.0, deadline - time.monotonic()))
+            if handle.process.is_alive():
+                handle.process.kill()
+                handle.process.join(timeout=5)
+
+    def up(self, index: int) -> bool:
+        """True while worker `index` runs and has started following its robots."""
+        handle = self._handles[index]
+        return handle is not None and handle.ready and handle.process.is_alive()
+
+    def pid(self, index: int) -> int | None:
+        """The process id of worker `index` now."""
+        handle = self._handles[index]
+        return None if handle is None else handle.process.pid
+
+    def ask_all(self, kind: str, argument: Any = None) -> list[Any]:
+        """Every worker's answer to one request, asked of all at once; a worker that fails gives none."""
+        handles = [handle for handle in self._handles if handle is not None and handle.ready]
+        asked = []
+        for handle in handles:
+            handle.lock.acquire()
+            try:
+                handle.requests.send((kind, argument))
+                asked.append(handle)
+            except (OSError, ValueError):
+                handle.lock.release()
+                self._fail(handle, "its request pipe is closed")
+        answers = []
+        for handle in asked:
+            try:
+                answer = self._receive(handle, kind)
+            finally:
+                handle.lock.release()
+            if answer is not None:
+                answers.append(answer[0])
+        return answers
+
+    def ask(self, index: int, kind: str, argument: Any = None) -> tuple[Any] | None:
+        """Worker `index`'s answer in a 1-tuple, or None when it failed to answer."""
+        handle = self._handles[index]
+        if handle is None or not handle.ready:
+            return None
+        with handle.lock:
+            try:
+                handle.requests.send((kind, argument))
+            except (OSError, ValueError):
+                self._fail(handle, "its request pipe is closed")
+                return None
+            return self._receive(handle, kind)
+
+    def _receive(self, handle: _Handle, kind: str) -> tuple[Any] | None:
+        try:
+            if not handle.requests.poll(ANSWER_TIMEOUT_SECONDS):
+                self._fail(handle, f"it did not answer {kind!r} within {ANSWER_TIMEOUT_SECONDS:g}s")
+                return None
+            status, value = handle.requests.recv()
+        except (EOFError, OSError, ValueError):
+            self._fail(handle, f"it went away while answering {kind!r}")
+            return None
+        if status != "ok":
+            log.error("ingest worker %d could not answer %s: %s", handle.index, kind, value)
+            return None
+        return (value,)
+
+    def _fail(self, handle: _Handle, why: str) -> None:
+        """Take a worker that cannot answer for dead: kill it, and the supervisor restarts it."""
+        if handle.process.is_alive() and not self._stopping.is_set():
+            log.error(
+                "ingest worker %d (pid %s) is failing: %s; killing it", handle.index, handle.process.pid, why
+            )
+            handle.process.kill()
+        handle.ready = False
+
+    def _spawn(self, index: int) -> _Handle:
+        requests, child_requests = self._context.Pipe()
+        events, child_events = self._context.Pipe(duplex=False)
+        process = self._context.Process(
+            target=run_worker,
+            args=(self.config, index, self.count, child_requests, child_events),
+            name=f"overseer-ingest-{index}",
+            daemon=True,
+        )
+        process.start()
+        child_requests.close()
+        child_events.close()
+        handle = _Handle(index, process, requests, events)
+        self._handles[index] = handle
+        threading.Thread(
+            target=self._relay_events, args=(handle,), name=f"events-{index}", daemon=True
+        ).start()
+        return handle
+
+    def _await_ready(self, handle: _Handle) -> None:
+        try:
+            if not handle.requests.poll(START_TIMEOUT_SECONDS):
+                raise WorkerStartError(
+                    f"ingest worker {handle.index} did not start within {START_TIMEOUT_SECONDS:g}s"
+                )
+            status, detail = handle.requests.recv()
+        except (EOFError, OSError) as error:
+            raise WorkerStartError(
+                f"ingest worker {handle.index} exited while starting (exit code {handle.process.exitcode})"
+            ) from error
+        if status == FAILED:
+            raise WorkerStartError(f"ingest worker {handle.index} could not start: {detail}")
+        if status != READY:
+            raise WorkerStartError(f"ingest worker {handle.index} said {status!r} while starting")
+        handle.ready = True
+
+    def _relay_events(self, handle: _Handle) -> None:
+        while True:
+            try:
+                batch = handle.events.recv()
+            except (EOFError, OSError):
+                handle.events.close()
+                return
+            if self._events is not None:
+                self._events(batch)
+
+    def _supervise(self) -> None:
+        while not self._stopping.wait(SUPERVISE_INTERVAL_SECONDS):
+            for index, handle in enumerate(self._handles):
+                if handle is None or handle.process.is_alive() or self._stopping.is_set():
+                    continue
+                now = time.monotonic()
+                if not self._died_at[index]:
+                    self._died_at[index] = now
+                    log.error(
+                        "ingest worker %d (pid %s) exited with code %s; restarting it",
+                        index,
+                        handle.process.pid,
+                        handle.process.exitcode,
+                    )
+                if now - self._restarted_at[index] >= RESTART_DELAY_SECONDS:
+                    self._restart(index, handle)
+
+    def _restart(self, index: int, dead: _Handle) -> None:
+        with dead.lock:
+            dead.ready = False
+            dead.requests.close()  # its events pipe is closed by its relay thread, at end of file
+        self.restarts[index] += 1
+        self._died_at[index] = 0.0
+        self._restarted_at[index] = time.monotonic()
+        handle = self._spawn(index)
+        try:
+            self._await_ready(handle)
+        except WorkerStartError as error:
+            log.error("%s; trying again", error)
+            handle.process.kill()
+            return
+        log.info("ingest worker %d restarted (pid %s)", index, handle.process.pid)

@@ -1,0 +1,155 @@
+"""One ingest worker: its share of the robots, its own fleet model, and answers to the exporter's requests.
+
+The exporter talks to a worker over two pipes: requests and answers on one, the worker's events (for the
+event history) on the other. The worker ends when the exporter closes the request pipe, or dies with it.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import signal
+import threading
+from dataclasses import dataclass, replace
+from multiprocessing.connection import Connection
+from typing import Any
+
+from overseer.config import Config
+from overseer.history.events import Event
+from overseer.history.service import TransitionWatch
+from overseer.log_format import configure_logging
+from overseer.model import FleetModel
+from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.message_labels import MessageLabels
+from overseer.serve.metrics import FleetCollector
+from overseer.sources import Source, build_sources, enabled_transports
+from overseer.workers.merge import portable_robots
+
+log = logging.getLogger(__name__)
+
+EXPIRY_INTERVAL_SECONDS = 1.0
+READY = "ready"
+FAILED = "failed"
+
+
+def worker_config(config: Config, worker: int, workers: int) -> Config:
+    """The configuration worker `worker` of `workers` runs with: its robots, and its share of the cap."""
+    share = config.fleet.max_robots // workers + (worker < config.fleet.max_robots % workers)
+    return replace(
+        config,
+        shard=config.shard.for_worker(worker, workers),
+        fleet=replace(config.fleet, max_robots=share),
+        icinga2=None,  # the exporter pushes for the whole fleet
+    )
+
+
+@dataclass
+class _Worker:
+    """The running parts of a worker."""
+
+    model: FleetModel
+    sources: list[Source]
+    exposition: FleetExposition
+    collector: FleetCollector
+    watch: TransitionWatch | None
+
+    def answer(self, kind: str, argument: Any) -> Any:
+        """The answer to one request from the exporter."""
+        if kind == "part":
+            return self.exposition.render_part()
+        if kind == "families":
+            return list(self.collector.collect())
+        snapshot = self.model.snapshot()
+        if kind == "robots":
+            return robots_document(snapshot)
+        if kind == "robot":
+            robot = snapshot.find(argument)
+            return None if robot is None else robot_document(snapshot, robot)
+        if kind == "components":
+            assert isinstance(argument, ComponentQuery)
+            return components_document(snapshot, argument)
+        if kind == "snapshot":
+            return replace(snapshot, robots=tuple(portable_robots(snapshot)))
+        raise ValueError(f"unknown request {kind!r}")
+
+
+def run_worker(config: Config, worker: int, workers: int, requests: Connection, events: Connection) -> None:
+    """The worker process: start following its robots, then answer requests until the exporter leaves."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the exporter decides
+    configure_logging(config.log_level, config.log_format)
+    config = worker_config(config, worker, workers)
+    try:
+        running = _start(config, events)
+    except Exception as error:  # told to the exporter, which fails its start with it
+        log.exception("ingest worker %d failed to start", worker)
+        requests.send((FAILED, f"{type(error).__name__}: {error}"))
+        return
+    requests.send((READY, None))
+    threading.Thread(target=_expire_loop, args=(running.model,), name="expiry", daemon=True).start()
+    while True:
+        try:
+            kind, argument = requests.recv()
+        except (EOFError, OSError):
+            break  # the exporter is gone or stopping
+        try:
+            reply: tuple[str, Any] = ("ok", running.answer(kind, argument))
+        except Exception as error:
+            log.exception("ingest worker %d failed to answer %s", worker, kind)
+            reply = ("error", f"{type(error).__name__}: {error}")
+        try:
+            requests.send(reply)
+        except (BrokenPipeError, OSError):
+            break
+    for source in running.sources:
+        source.stop()
+
+
+def _start(config: Config, events: Connection) -> _Worker:
+    model = FleetModel(config.fleet)
+    sources = build_sources(config, model)
+    metrics, external_url = config.metrics, config.web.external_url
+    messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
+    transports = enabled_transports(config)
+    exposition = FleetExposition(
+        model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
+    )
+    collector = FleetCollector(
+        model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
+    )
+    watch = TransitionWatch(model, _EventSender(events).send) if config.events.enabled else None
+    if watch is not None:
+        watch.start()  # before the transports, so that it sees their first messages
+    for source in sources:
+        source.start()
+    return _Worker(model, sources, exposition, collector, watch)
+
+
+class _EventSender:
+    """Sends the detector's events to the exporter from a thread of its own, so ingest never waits on it."""
+
+    def __init__(self, connection: Connection) -> None:
+        self._connection = connection
+        self._queue: queue.SimpleQueue[list[Event]] = queue.SimpleQueue()
+        threading.Thread(target=self._send_loop, name="event-sender", daemon=True).start()
+
+    def send(self, events: list[Event]) -> None:
+        if events:
+            self._queue.put(events)
+
+    def _send_loop(self) -> None:
+        while True:
+            batch = self._queue.get()
+            while not self._queue.empty() and len(batch) < 10_000:
+                batch = batch + self._queue.get()
+            try:
+                self._connection.send(batch)
+            except (BrokenPipeError, OSError):
+                return  # the exporter is gone; the request loop ends the worker
+
+
+def _expire_loop(model: FleetModel) -> None:
+    stop = threading.Event()
+    while not stop.wait(EXPIRY_INTERVAL_SECONDS):
+        for robot in model.expire():
+            log.info("forgot robot %s after %gs of silence", robot, model.limits.expire_after)
