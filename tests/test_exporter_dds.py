@@ -242,3 +242,25 @@ def test_varying_values_reach_the_exporter(tmp_path: Path, dds_domain: int) -> N
             message="new voltage",
         )
     assert 12.0 <= first < 13.0 and 12.0 <= second < 13.0
+
+
+def test_every_status_changes_at_every_publication_with_vary_values_all(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    def readings() -> dict[tuple[tuple[str, str], ...], float]:
+        values = exporter.samples().get("ros_diagnostics_value", {})
+        return {labels: value for labels, value in values.items() if ("key", "reading") in labels}
+
+    with (
+        running_exporter(tmp_path, dds_domain) as exporter,
+        running_simulator(
+            tmp_path, dds_domain, "--robots=2", "--components=5", "--rate=5", "--vary-values=all"
+        ),
+    ):
+        first = wait_for(lambda: len(r := readings()) == 2 * 10 and r, 30, message="a reading per status")
+        second = wait_for(
+            lambda: (r := readings()) and all(r[labels] != first[labels] for labels in first) and r,
+            30,
+            message="every reading changed",
+        )
+    assert all(12.0 <= value < 13.0 for value in (*first.values(), *second.values()))

@@ -276,7 +276,13 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
         help="type hash in the rmw_zenoh keys (default: DiagnosticArray's in Jazzy)",
     )
     parser.add_argument(
-        "--vary-values", action="store_true", help="change each robot's battery voltage at every publication"
+        "--vary-values",
+        nargs="?",
+        const="battery",
+        default="none",
+        choices=("none", "battery", "all"),
+        help="change values at every publication: each robot's battery voltage (battery, the default "
+        "without a word), or a value of every status (all)",
     )
     parser.add_argument(
         "--wait-for-subscribers",

@@ -47,9 +47,26 @@ VARYING_COMPONENT = "/Power/Robot Battery"  # leaf 0: every simulated robot has 
 VARYING_PLACEHOLDER = "VVVVVVVV"
 
 
+VARY_VALUES = ("none", "battery", "all")
+VARYING_KEY = "reading"  # the key-value every status carries with --vary-values all
+
+
 def _with_varying_voltage(status: DiagnosticStatus) -> DiagnosticStatus:
     values = tuple((k, VARYING_PLACEHOLDER if k == "voltage" else v) for k, v in status.values)
     return status._replace(values=values)
+
+
+def _with_varying_reading(status: DiagnosticStatus) -> DiagnosticStatus:
+    return status._replace(values=(*status.values, (VARYING_KEY, VARYING_PLACEHOLDER)))
+
+
+def _offsets(data: bytearray, needle: bytes) -> list[int]:
+    """Where `needle` starts in `data`, every time."""
+    found, start = [], data.find(needle)
+    while start >= 0:
+        found.append(start)
+        start = data.find(needle, start + len(needle))
+    return found
 
 
 class EventError(ValueError):
@@ -95,7 +112,9 @@ class SimulatedRobot:
     silenced: set[str] = field(default_factory=set)
     running: bool = True
     payload_tail: bytearray | None = None  # the encoded array after its stamp, rebuilt when state changes
-    varying_at: int = -1  # offset in payload_tail of a fixed-width value rewritten at every publication
+    varying_at: list[int] = field(
+        default_factory=list
+    )  # offsets in payload_tail of values rewritten each time
 
 
 @dataclass
@@ -113,7 +132,9 @@ class SimulatorSettings:
     topic: str = AGGREGATED
     loopback_only: bool = False
     peers: tuple[DdsPeer, ...] = ()  # hosts to announce the robots to directly, e.g. the exporter's
-    vary_values: bool = False
+    vary_values: str = (
+        "none"  # "battery": one voltage per robot changes at every publication; "all": every status
+    )
     wait_for_subscribers: float = 0.0  # seconds to wait until every writer has a matched reader
     events: list[Event] = field(default_factory=list)
 
@@ -212,21 +233,25 @@ class FleetSimulator:
         """The robot's serialized array (CDR with its header) stamped `stamp`, varied for `now` if asked."""
         if robot.payload_tail is None:
             robot.payload_tail = bytearray(self.encode(robot)[12:])
-            robot.varying_at = robot.payload_tail.find(VARYING_PLACEHOLDER.encode())
-        if robot.varying_at >= 0:
-            # A voltage that changes at every publication, as real ones do, without re-encoding.
-            reading = f"{12.0 + (now * 7.3 % 1.0):0{len(VARYING_PLACEHOLDER)}.5f}"
-            robot.payload_tail[robot.varying_at : robot.varying_at + len(reading)] = reading.encode()
+            robot.varying_at = _offsets(robot.payload_tail, VARYING_PLACEHOLDER.encode())
+        if robot.varying_at:
+            # Values that change at every publication, as real ones do, without re-encoding.
+            reading = f"{12.0 + (now * 7.3 % 1.0):0{len(VARYING_PLACEHOLDER)}.5f}".encode()
+            tail, width = robot.payload_tail, len(reading)
+            for offset in robot.varying_at:
+                tail[offset : offset + width] = reading
         return b"\x00\x01\x00\x00" + stamp + bytes(robot.payload_tail)
 
     def encode(self, robot: SimulatedRobot) -> bytes:
         """The robot's current DiagnosticArray as little-endian CDR, padded to whole words."""
         statuses = aggregated_statuses(self.leaves, robot.levels, robot.silenced)
-        if self.settings.vary_values:
+        if self.settings.vary_values == "battery":
             statuses = [
                 _with_varying_voltage(status) if status.name == VARYING_COMPONENT else status
                 for status in statuses
             ]
+        elif self.settings.vary_values == "all":
+            statuses = [_with_varying_reading(status) for status in statuses]
         payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", tuple(statuses)))
         return payload + b"\x00" * (-len(payload) & 3)
 

@@ -1,0 +1,267 @@
+"""Ingest workers' answers joined: the same fleet split over k models serves exactly what one model serves.
+
+Each test feeds the same arrays to one model and to k worker models (each given only the robots its
+shard owns, as the DDS and Zenoh sources filter them), then compares what the exporter would serve.
+The process machinery is tested end to end in test_ingest_workers.py.
+"""
+
+from __future__ import annotations
+
+import pickle
+import re
+from collections.abc import Iterable
+from dataclasses import replace
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from prometheus_client.metrics_core import Metric
+from prometheus_client.parser import text_string_to_metric_families
+
+from overseer.config import Config
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.model.shard import Shard
+from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
+from overseer.serve.exposition import ExpositionAssembler, FleetExposition
+from overseer.serve.metrics import FleetCollector
+from overseer.workers.merge import (
+    merge_components_documents,
+    merge_families,
+    merge_robots_documents,
+    merge_snapshots,
+    portable_robots,
+)
+from overseer.workers.process import worker_config
+from support.strategies import arrays
+
+HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,", ""]
+LIMITS = FleetLimits(stale_after=5, robot_timeout=10, expire_after=60, max_components_per_robot=6)
+
+
+class Clock:
+    """A hand-moved clock shared by every model of a test."""
+
+    def __init__(self) -> None:
+        """Start at a fixed unix time."""
+        self.now = 1_700_000_000.0
+
+    def __call__(self) -> float:
+        """The current time."""
+        return self.now
+
+
+class SplitFleet:
+    """One model holding the whole fleet, and `workers` models each holding the robots it owns."""
+
+    def __init__(self, workers: int, shard: Shard | None = None) -> None:
+        """Empty models on one clock."""
+        self.clock = Clock()
+        self.shard = shard or Shard()
+        self.whole = FleetModel(LIMITS, self.clock)
+        self.owners = [self.shard.for_worker(index, workers) for index in range(workers)]
+        self.parts = [FleetModel(LIMITS, self.clock) for _ in range(workers)]
+
+    def apply(self, robot: str, array: DiagnosticArray) -> None:
+        """Feed `array` to the whole model and to the one worker model that owns `robot`."""
+        if not self.shard.owns(robot):
+            return
+        self.whole.apply(robot, array, "dds")
+        owners = [part for owner, part in zip(self.owners, self.parts, strict=True) if owner.owns(robot)]
+        assert len(owners) == 1
+        owners[0].apply(robot, array, "dds")
+
+    def count(self, robot: str, result: str) -> None:
+        """Count a message result in the whole model and in the owner's (as a source would)."""
+        self.whole.count_message("dds", result)
+        owner = next(part for o, part in zip(self.owners, self.parts, strict=True) if o.owns(robot))
+        owner.count_message("dds", result)
+
+
+def varied_fleet(workers: int, robots: int = 24) -> SplitFleet:
+    fleet = SplitFleet(workers)
+    for index in range(robots):
+        name = f"robot{index}/{HOSTILE[index % len(HOSTILE)]}"
+        statuses = [
+            DiagnosticStatus(
+                (index + number) % 4,
+                f"/Part{number}",
+                HOSTILE[number % len(HOSTILE)],
+                f"hw{number}",
+                (("v", f"{index}.{number} V"), ("t", "nan")),
+            )
+            for number in range(4 + index % 5)  # some beyond the component limit: dropped and counted
+        ]
+        statuses.append(DiagnosticStatus(7, "/bad level", "", "", ()))  # dropped: invalid level
+        fleet.apply(name, DiagnosticArray(0, 0, "", tuple(statuses)))
+        if index % 3 == 0:
+            fleet.count(name, "decode_error")
+    fleet.clock.now += 3
+    for index in range(0, robots, 4):  # a quarter report again, one component short: the others go stale
+        name = f"robot{index}/{HOSTILE[index % len(HOSTILE)]}"
+        fleet.apply(name, DiagnosticArray(0, 0, "", (DiagnosticStatus(1, "/Part0", "again", "hw0", ()),)))
+    fleet.clock.now += 3
+    return fleet
+
+
+def samples(text: bytes) -> dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]]:
+    """Each family's samples, sorted (values as text, so NaN equals NaN); fails on a family given twice."""
+    families: dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]] = {}
+    for family in text_string_to_metric_families(text.decode()):
+        assert family.name not in families, f"{family.name} appears twice"
+        families[family.name] = sorted(
+            (sample.name, tuple(sorted(sample.labels.items())), repr(sample.value))
+            for sample in family.samples
+        )
+    return families
+
+
+def family_samples(
+    families: Iterable[Metric],
+) -> dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]]:
+    """Each family's samples, sorted, from collected families."""
+    return {
+        family.name: sorted(
+            (sample.name, tuple(sorted(sample.labels.items())), repr(sample.value))
+            for sample in family.samples
+        )
+        for family in families
+    }
+
+
+@pytest.mark.parametrize("workers", [1, 2, 3, 5])
+def test_every_robot_of_a_shard_is_owned_by_exactly_one_of_its_workers(workers: int) -> None:
+    names = [f"robot{index}" for index in range(3000)] + HOSTILE
+    for shard in (Shard(), Shard(1, 3)):
+        for name in names:
+            owners = sum(shard.for_worker(index, workers).owns(name) for index in range(workers))
+            assert owners == (1 if shard.owns(name) else 0), name
+    spread = [
+        sum(Shard().for_worker(index, workers).owns(name) for name in names) for index in range(workers)
+    ]
+    assert min(spread) > 0.8 * len(names) / workers  # the hash spreads robots evenly
+
+
+def test_a_worker_outside_the_pool_is_refused() -> None:
+    with pytest.raises(ValueError, match="worker 2 is not one of 0-1"):
+        Shard().for_worker(2, 2)
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_joined_exposition_has_exactly_the_series_of_one_model(workers: int) -> None:
+    fleet = varied_fleet(workers)
+    pattern = re.compile(".*")
+    whole = FleetExposition(fleet.whole, pattern, ["dds", "zenoh"]).render()
+    parts = [FleetExposition(model, pattern, ["dds", "zenoh"]).render_part() for model in fleet.parts]
+    assert sum(part.robots for part in parts) == len(fleet.whole.snapshot().robots)
+    assert all(part.robots for part in parts)  # every worker has robots: the join is really tested
+    joined = ExpositionAssembler(["dds", "zenoh"]).assemble(pickle.loads(pickle.dumps(parts)))
+    assert samples(joined) == samples(whole)
+    # Counters add up: invalid levels and component-limit drops were counted in every worker.
+    dropped = dict((labels, value) for _, labels, value in samples(joined)["overseer_statuses_dropped"])
+    assert dropped[(("reason", "invalid_level"),)] == repr(24.0)  # one per robot, whichever worker counted it
+    assert len(joined.splitlines()) == len(whole.splitlines())
+
+
+def test_joined_openmetrics_families_equal_one_models() -> None:
+    fleet = varied_fleet(3)
+    pattern = re.compile(".*")
+    whole = list(FleetCollector(fleet.whole, pattern, ["dds"], external_url="http://x").collect())
+    answers = [
+        pickle.loads(
+            pickle.dumps(list(FleetCollector(model, pattern, ["dds"], external_url="http://x").collect()))
+        )
+        for model in fleet.parts
+    ]
+    merged = list(merge_families(answers))
+    assert [family.name for family in merged] == [family.name for family in whole]
+    assert family_samples(merged) == family_samples(whole)
+
+
+@pytest.mark.parametrize(
+    "query",
+    [
+        ComponentQuery(),
+        ComponentQuery(limit=3),
+        ComponentQuery(limit=1000),
+        ComponentQuery(levels=None, text="part1"),
+        ComponentQuery(text="quote"),
+        ComponentQuery(robot="robot5/new\nline"),
+        ComponentQuery(text="no such thing"),
+    ],
+)
+def test_joined_components_document_equals_one_models(query: ComponentQuery) -> None:
+    from overseer.levels import Level
+
+    fleet = varied_fleet(3)
+    for levels in (None, frozenset({Level.ERROR, Level.STALE})):
+        asked = replace(query, levels=levels)
+        whole = components_document(fleet.whole.snapshot(), asked)
+        answers = [components_document(model.snapshot(), asked) for model in fleet.parts]
+        joined = merge_components_documents(answers, asked.limit, whole["generated_at"])
+        assert joined == whole
+
+
+def test_joined_robots_document_and_each_robot_equal_one_models() -> None:
+    fleet = varied_fleet(3)
+    whole_snapshot = fleet.whole.snapshot()
+    whole = robots_document(whole_snapshot)
+    joined = merge_robots_documents(
+        [robots_document(m.snapshot()) for m in fleet.parts], whole["generated_at"]
+    )
+    assert joined == whole
+    for robot in whole_snapshot.robots:
+        owner = next(part for o, part in zip(fleet.owners, fleet.parts, strict=True) if o.owns(robot.name))
+        snapshot = owner.snapshot()
+        found = snapshot.find(robot.name)
+        assert found is not None
+        assert robot_document(snapshot, found) == robot_document(whole_snapshot, robot)
+
+
+def test_joined_snapshot_crosses_a_pipe_and_judges_as_one_model() -> None:
+    fleet = varied_fleet(2)
+    whole = fleet.whole.snapshot()
+    sent = [
+        pickle.loads(pickle.dumps(replace(s, robots=tuple(portable_robots(s)))))
+        for s in (m.snapshot() for m in fleet.parts)
+    ]
+    joined = merge_snapshots(sent, LIMITS, whole.taken_at)
+    assert sorted(r.name for r in joined.robots) == sorted(r.name for r in whole.robots)
+    by_name = {robot.name: robot for robot in joined.robots}
+    for robot in whole.robots:
+        assert joined.robot_level(by_name[robot.name]) == whole.robot_level(robot)
+        assert dict(by_name[robot.name].components) == dict(robot.components)
+    assert dict(joined.message_counts) == dict(whole.message_counts)
+    assert dict(joined.dropped_statuses) == dict(whole.dropped_statuses)
+
+
+@pytest.mark.parametrize(("max_robots", "workers"), [(10_000, 16), (7, 3), (1, 2)])
+def test_workers_share_the_robot_cap_without_exceeding_it(max_robots: int, workers: int) -> None:
+    config = replace(Config(), fleet=FleetLimits(max_robots=max_robots))
+    shares = [worker_config(config, index, workers).fleet.max_robots for index in range(workers)]
+    assert sum(shares) == max_robots
+    assert max(shares) - min(shares) <= 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.tuples(st.sampled_from([f"r{i}" for i in range(12)]), arrays(st.integers(0, 3))), max_size=30)
+)
+def test_any_arrays_split_over_workers_serve_what_one_model_serves(
+    received: list[tuple[str, DiagnosticArray]],
+) -> None:
+    fleet = SplitFleet(3)
+    for robot, array in received:
+        fleet.apply(robot, array)
+        fleet.clock.now += 1
+    pattern = re.compile(".*")
+    whole = FleetExposition(fleet.whole, pattern, ["dds"]).render()
+    parts = [FleetExposition(model, pattern, ["dds"]).render_part() for model in fleet.parts]
+    assert samples(ExpositionAssembler(["dds"]).assemble(parts)) == samples(whole)
+    query = ComponentQuery(limit=5)
+    joined = merge_components_documents(
+        [components_document(m.snapshot(), query) for m in fleet.parts], 5, 0.0
+    )
+    assert joined | {"generated_at": 0.0} == components_document(fleet.whole.snapshot(), query) | {
+        "generated_at": 0.0
+    }
