@@ -17,7 +17,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-from bench.common import Row, cpu_seconds, emit, resident_bytes
+from bench.common import Row, emit, tree_cpu_seconds, tree_resident_bytes
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -69,8 +69,8 @@ def run(robots: int, components: int, seconds: float) -> list[Row]:
         time.sleep(2)
         got = received(exporter.url)
         pid = exporter.process.pid
-        cpu = cpu_seconds(pid)
-        rss = resident_bytes(pid)
+        cpu = tree_cpu_seconds(pid)
+        rss = tree_resident_bytes(pid)
     statuses = robots * (components + 5)
     lost = max(0.0, published - got)
     label = f"{robots} robots x {components} components at 1 Hz"

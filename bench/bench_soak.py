@@ -22,7 +22,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench.common import Row, cpu_seconds, emit, resident_bytes
+from bench.common import Row, emit, tree_cpu_seconds, tree_resident_bytes
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -55,7 +55,7 @@ def scrape(url: str, pid: int, robots: int, started: float) -> Sample:
     latency = time.monotonic() - begun
     shown = parse_scrape(text)
     healthy = shown.robots_up == robots and shown.stale_components == 0
-    return Sample(begun - started, latency, resident_bytes(pid), healthy, shown.received, shown.lost)
+    return Sample(begun - started, latency, tree_resident_bytes(pid), healthy, shown.received, shown.lost)
 
 
 def window(samples: list[Sample], duration: float, start: float, end: float) -> list[Sample]:
@@ -98,12 +98,12 @@ def soak(robots: int, components: int, rate: float, duration: float, interval: f
                 if simulator.process.poll() is not None:
                     raise RuntimeError(f"the simulator stopped early:\n{simulator.log()[-2000:]}")
                 time.sleep(0.5)
-            started, cpu_before = time.monotonic(), cpu_seconds(pid)
+            started, cpu_before = time.monotonic(), tree_cpu_seconds(pid)
             samples = []
             while simulator.process.poll() is None:
                 samples.append(scrape(exporter.url, pid, robots, started))
                 time.sleep(max(0.0, started + len(samples) * interval - time.monotonic()))
-            elapsed, cpu = time.monotonic() - started, cpu_seconds(pid) - cpu_before
+            elapsed, cpu = time.monotonic() - started, tree_cpu_seconds(pid) - cpu_before
         finally:
             simulator.stop()
         published = published_count(simulator)

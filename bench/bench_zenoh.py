@@ -20,7 +20,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-from bench.common import Row, cpu_seconds, emit, resident_bytes
+from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -86,7 +86,11 @@ def run(transport: str, robots: int, components: int, seconds: float) -> list[Ro
         # CPU is measured from the first message received to the end: subscribing to the fleet is not ingest.
         while counted(exporter.url, transport, "received") == 0 and simulators[0].poll() is None:
             time.sleep(0.2)
-        started, started_cpu, router_cpu = time.monotonic(), cpu_seconds(pid), cpu_seconds(router.process.pid)
+        started, started_cpu, router_cpu = (
+            time.monotonic(),
+            tree_cpu_seconds(pid),
+            cpu_seconds(router.process.pid),
+        )
         published = 0
         for simulator in simulators:
             stdout, stderr = simulator.communicate(timeout=seconds + 1800)
@@ -96,11 +100,11 @@ def run(transport: str, robots: int, components: int, seconds: float) -> list[Ro
             published += int(match.group(1))
         time.sleep(4)
         elapsed = time.monotonic() - started
-        cpu = cpu_seconds(pid) - started_cpu
+        cpu = tree_cpu_seconds(pid) - started_cpu
         router_cpu = cpu_seconds(router.process.pid) - router_cpu
         got = counted(exporter.url, transport, "received")
         undecodable = counted(exporter.url, transport, "decode_error")
-        rss = resident_bytes(pid)
+        rss = tree_resident_bytes(pid)
     lost = max(0.0, published - got)
     label = f"{transport}, {robots} robots x {components} components at 1 Hz"
     rows = [

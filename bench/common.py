@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -91,3 +92,41 @@ def interleaved_rates(workloads: dict[str, Callable[[], int]], rounds: int = 5) 
             items = work()
             best[name] = max(best[name], items / (time.process_time() - started))
     return best
+
+
+def process_tree(pid: int) -> list[int]:
+    """`pid` and every process descending from it (an exporter and its ingest workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", encoding="ascii", errors="replace") as stat:
+                parent = int(stat.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError):
+            continue
+        children.setdefault(parent, []).append(int(entry))
+    tree, pending = [], [pid]
+    while pending:
+        current = pending.pop()
+        tree.append(current)
+        pending.extend(children.get(current, ()))
+    return tree
+
+
+def tree_cpu_seconds(pid: int) -> float:
+    """CPU time used so far by `pid` and its live descendants."""
+    total = 0.0
+    for member in process_tree(pid):
+        with contextlib.suppress(OSError, ValueError):  # it ended meanwhile
+            total += cpu_seconds(member)
+    return total
+
+
+def tree_resident_bytes(pid: int) -> int:
+    """Resident memory of `pid` and its live descendants, summed."""
+    total = 0
+    for member in process_tree(pid):
+        with contextlib.suppress(OSError, ValueError):
+            total += resident_bytes(member)
+    return total

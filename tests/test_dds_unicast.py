@@ -244,7 +244,12 @@ def test_max_participant_index_bounds_the_processes_probed_on_a_peer(tmp_path: P
         veth_namespace(multicast=False) as link,
         two_robot_processes(tmp_path, link, dds_domain, beta_uri=on_index_2, beta_index=2) as robots,
         exporter_on_host(
-            tmp_path, link, dds_domain, f"--dds.peer={link.inside_address}", "--dds.max-participant-index=1"
+            tmp_path,
+            link,
+            dds_domain,
+            f"--dds.peer={link.inside_address}",
+            "--dds.max-participant-index=1",
+            "--ingest.workers=1",  # each worker is a participant of its own: two would need both indices
         ) as exporter,
     ):
         wait_for(

@@ -114,6 +114,8 @@ class DdsSource:
         return peers_config(addresses, max_index)
 
     def _count_unresolved_peer(self, peer: DdsPeer, error: str) -> None:
+        if self._shard.worker != 0:
+            return  # every ingest worker resolves the same peers: the first counts and tells for all
         self._model.count_source_error(TRANSPORT, "peer_unresolved")
         log.warning("DDS peer %s left out: cannot resolve it (%s)", peer, error)
 

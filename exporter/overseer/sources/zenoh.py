@@ -45,6 +45,7 @@ RETRY_MIN_SECONDS = 0.5
 RETRY_MAX_SECONDS = 10.0
 PRUNE_INTERVAL_SECONDS = 60.0
 MAX_TOKENS_PER_ROBOT = 64
+MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
 CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
 
 
@@ -61,6 +62,8 @@ class ZenohSource:
         self._shard = shard or Shard()
         self._lock = threading.Lock()
         self._ingests: dict[tuple[str, str], PayloadIngest] = {}  # (robot, kind) → its topic's ingest
+        # Every worker hears every robot's key: the others' are known by key, so they cost a set lookup.
+        self._foreign: set[str] = set()
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
@@ -140,6 +143,8 @@ class ZenohSource:
     def _on_data(self, sample: zenoh.Sample) -> None:
         try:
             key = str(sample.key_expr)
+            if key in self._foreign:
+                return
             try:
                 parsed = parse_data_key(key, self._config.domain)
             except RejectedKey as rejected:
@@ -148,6 +153,8 @@ class ZenohSource:
                 return
             robot = parsed.namespace or self._config.unnamespaced_robot
             if not self._shard.owns(robot):
+                if len(self._foreign) < MAX_FOREIGN_KEYS:
+                    self._foreign.add(key)
                 return
             if parsed.key_format == RMW_ZENOH and parsed.type_hash != DIAGNOSTIC_ARRAY_HASH:
                 # Another revision of the message: read anyway (the codec checks every byte), but say so.

@@ -1,0 +1,166 @@
+"""Live values at fleet scale: every status changes at every publication, through ingest workers.
+
+Robots publish over Zenoh through one router (a router-mode session in its own process) exactly as
+rmw_zenoh does, with `--vary-values all`: each of a robot's statuses carries a reading that changes at
+every publication, so no status repeats the one before and the ingest's unchanged-status shortcut never
+applies. One simulator process per 2,500 robots publishes at 1 Hz for the given time, after the
+exporter's subscription matches.
+
+Per fleet size: lost updates (published minus received), the exporter's CPU (its process and its ingest
+workers, from the first message to the end), its resident memory (all its processes), the time one
+scrape of /metrics takes while the fleet publishes, and the publishers' CPU, which competes with the
+exporter for this machine's cores. The smallest fleet also runs with one worker, in the same run, for
+the ratio the workers bring. `statuses per exporter core-second` is what one core ingests; times the
+cores of a bigger server it predicts the fleet that server keeps up with.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from support.processes import running_exporter  # noqa: E402 - the test harness lives in tests/
+from support.zenoh import exporter_args, running_router_process, simulator_args  # noqa: E402
+
+SIMULATOR_ROBOTS = 2500
+AGGREGATOR_GROUPS = 5  # the simulated aggregator adds a group status per 10 leaves (5 for 50)
+
+
+def received(url: str) -> float:
+    """overseer_messages_total of received Zenoh messages."""
+    with urllib.request.urlopen(url + "/metrics", timeout=120) as response:
+        text = response.read().decode()
+    match = re.search(r'overseer_messages_total\{result="received",transport="zenoh"\} (\S+)', text)
+    return float(match.group(1)) if match else 0.0
+
+
+def scrape_seconds(url: str) -> float:
+    """How long one scrape of /metrics takes, body read."""
+    started = time.perf_counter()
+    with urllib.request.urlopen(url + "/metrics", timeout=120) as response:
+        response.read()
+    return time.perf_counter() - started
+
+
+def run(robots: int, components: int, seconds: float, workers: int) -> list[Row]:
+    """Publish `robots` x `components` live values at 1 Hz for `seconds` through `workers` workers."""
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        running_router_process(Path(tmp)) as (port, router),
+        running_exporter(
+            Path(tmp), None, *exporter_args(port), f"--ingest.workers={workers}", "--log.level=warning"
+        ) as exporter,
+    ):
+        pid = exporter.process.pid
+        shares = [min(SIMULATOR_ROBOTS, robots - first) for first in range(0, robots, SIMULATOR_ROBOTS)]
+        simulators = [
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "overseer.cli",
+                    "simulate",
+                    *simulator_args(port),
+                    f"--robots={share}",
+                    f"--namespace-prefix=s{index}/robot",
+                    f"--components={components}",
+                    "--warn=1",
+                    "--error=1",
+                    "--vary-values=all",
+                    "--wait-for-subscribers=900",
+                    f"--duration={seconds}",
+                    "--log.level=warning",
+                ],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            for index, share in enumerate(shares)
+        ]
+        while received(exporter.url) == 0 and simulators[0].poll() is None:
+            time.sleep(0.2)
+        # Ingest alone first (no scrape: one renders every series, all changed), then scrapes every 3 s.
+        window = 0.6 * seconds
+        exporter_cpu = tree_cpu_seconds(pid)
+        publisher_cpu = sum(cpu_seconds(simulator.pid) for simulator in simulators)
+        router_cpu = cpu_seconds(router.process.pid)
+        time.sleep(window)
+        ingest_cpu = tree_cpu_seconds(pid) - exporter_cpu
+        publisher_cpu = sum(cpu_seconds(simulator.pid) for simulator in simulators) - publisher_cpu
+        router_cpu = cpu_seconds(router.process.pid) - router_cpu
+        scrapes = []
+        while all(simulator.poll() is None for simulator in simulators):
+            scrapes.append(scrape_seconds(exporter.url))
+            time.sleep(max(0.0, 3.0 - scrapes[-1]))
+        published = 0
+        for simulator in simulators:
+            stdout, stderr = simulator.communicate(timeout=seconds + 1800)
+            match = re.search(r"published (\d+) messages", stdout)
+            if simulator.returncode != 0 or match is None:
+                raise RuntimeError(f"simulator failed: {stdout[-2000:]} {stderr[-2000:]}")
+            published += int(match.group(1))
+        time.sleep(4)
+        got = received(exporter.url)
+        rss = tree_resident_bytes(pid)
+    lost = max(0.0, published - got)
+    # The window's statuses: the fleet's rate, scaled by the share that arrived over the whole run.
+    statuses = robots * (components + AGGREGATOR_GROUPS) * window * (got / published if published else 0.0)
+    label = f"{robots} robots x {components} live at 1 Hz, {workers} worker{'s' if workers > 1 else ''}"
+    return [
+        Row("live values", f"{label}: messages published", published, "messages"),
+        Row(
+            "live values",
+            f"{label}: publications achieved",
+            published / (robots * seconds) * 100,
+            "% of 1 Hz",
+        ),
+        Row("live values", f"{label}: lost updates", lost, "messages", "0", lost == 0),
+        Row("live values", f"{label}: lost share", lost / published * 100 if published else 0.0, "%"),
+        Row("live values", f"{label}: exporter CPU ingesting", ingest_cpu / window * 100, "% of a core"),
+        Row(
+            "live values",
+            f"{label}: statuses per exporter core-second",
+            statuses / ingest_cpu if ingest_cpu else 0.0,
+            "statuses",
+        ),
+        Row("live values", f"{label}: exporter resident memory", rss / 1e6, "MB"),
+        Row(
+            "live values",
+            f"{label}: scrape while publishing (median)",
+            statistics.median(scrapes) * 1000 if scrapes else 0.0,
+            "ms",
+        ),
+        Row("live values", f"{label}: publishers' CPU", publisher_cpu / window * 100, "% of a core"),
+        Row("live values", f"{label}: router CPU", router_cpu / window * 100, "% of a core"),
+    ]
+
+
+def main() -> None:
+    """The smallest fleet with one worker and with one per core, then every fleet with one per core."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, nargs="+", default=[1000, 5000, 10000])
+    parser.add_argument("--components", type=int, default=50)
+    parser.add_argument("--seconds", type=float, default=20)
+    parser.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    options = parser.parse_args()
+    rows = run(options.robots[0], options.components, options.seconds, 1)
+    for robots in options.robots:
+        rows += run(robots, options.components, options.seconds, options.workers)
+    emit(rows)
+
+
+if __name__ == "__main__":
+    main()
