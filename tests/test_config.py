@@ -164,3 +164,46 @@ def test_run_on_a_busy_port_exits_nonzero_with_one_line() -> None:
     assert result.stderr.splitlines() == [
         f"overseer run: cannot listen on 127.0.0.1:{port}: Address already in use"
     ]
+
+
+def test_ingest_workers_default_to_the_cores_this_process_may_use_at_most_sixteen() -> None:
+    import os
+
+    cores = len(os.sched_getaffinity(0))
+    assert load_config(None).ingest.workers == min(cores, 16)
+    assert load_config(None, {"ingest.workers": "3"}).ingest.workers == 3
+    assert load_config(None, {"ingest.workers": 1}).ingest.workers == 1
+
+
+@pytest.mark.parametrize("value", [0, 65, -1, "two", True, 1.5, ""])
+def test_bad_ingest_workers_name_the_key_and_the_range(value: object) -> None:
+    with pytest.raises(ConfigError, match=r"ingest\.workers: expected a whole number from 1 to 64"):
+        load_config(None, {"ingest.workers": value})
+
+
+def test_run_with_a_worker_that_cannot_start_exits_nonzero_naming_the_worker(tmp_path: Path) -> None:
+    """Worker 1 of 2 cannot join: a fixed participant index that worker 0 took first (real Cyclone DDS)."""
+    fixed_index = (
+        '<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+        "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>7</ParticipantIndex>"
+        "</Discovery></Domain></CycloneDDS>"
+    )
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    result = subprocess.run(
+        [
+            *overseer_command(),
+            "run",
+            f"--web.listen-address=127.0.0.1:{port}",
+            "--dds.domain=97",
+            f"--dds.cyclonedds-uri={fixed_index}",
+            "--ingest.workers=2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 1
+    assert "ingest worker 1 could not start" in result.stderr.splitlines()[-1]

@@ -22,7 +22,7 @@ from overseer.serve.metrics import FleetCollector
 from overseer.serve.web_config import load_web_config
 from overseer.sources import Source, build_sources, enabled_transports
 from overseer.workers.metrics import WorkerPoolCollector
-from overseer.workers.pool import WorkerPool
+from overseer.workers.pool import WorkerPool, WorkerStartError
 from overseer.workers.view import PooledCollector, PooledSnapshots, PooledView
 
 log = logging.getLogger(__name__)
@@ -98,7 +98,10 @@ class Exporter:
         self.server.events = self.history.store if self.history is not None else None
 
     def start(self) -> None:
-        """Start the transports (or workers), the expiry timer and the HTTP server threads."""
+        """Start the transports (or workers), the expiry timer and the HTTP server threads.
+
+        `WorkerStartError` when a worker cannot start; everything started is stopped again.
+        """
         if self.history is not None:
             self.history.start()
         if self._watch is not None:
@@ -106,7 +109,14 @@ class Exporter:
         for source in self.sources:
             source.start()
         if self.pool is not None:
-            self.pool.start()
+            try:
+                self.pool.start()
+            except WorkerStartError:
+                self.pool.stop()
+                self.server.server_close()
+                if self.history is not None:
+                    self.history.stop()
+                raise
         else:
             threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()

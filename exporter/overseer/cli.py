@@ -406,6 +406,7 @@ def _run(args: argparse.Namespace) -> int:
     config = load_config(args.config_file, _exporter_overrides(args))
     configure_logging(config.log_level, config.log_format)
     from overseer.app import Exporter
+    from overseer.workers.pool import WorkerStartError
 
     try:
         exporter = Exporter(config)
@@ -414,7 +415,11 @@ def _run(args: argparse.Namespace) -> int:
             f"overseer run: cannot listen on {config.web.listen_address}: {error.strerror}", file=sys.stderr
         )
         return 1
-    exporter.start()
+    try:
+        exporter.start()
+    except WorkerStartError as error:
+        print(f"overseer run: {error}", file=sys.stderr)
+        return 1
     _wait_for_signal()
     exporter.stop()
     return 0

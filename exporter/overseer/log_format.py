@@ -32,8 +32,29 @@ class JsonFormatter(logging.Formatter):
         return json.dumps(line, ensure_ascii=False, default=str)
 
 
-def configure_logging(level: str, log_format: str = "text") -> None:
-    """Send the whole process's log to stderr at `level`, as `text` or `json` lines."""
+def configure_logging(level: str, log_format: str = "text", worker: int | None = None) -> None:
+    """Send the whole process's log to stderr at `level`, as `text` or `json` lines.
+
+    In an ingest worker, `worker` is its number: text lines say `[worker N]`, JSON lines carry `worker`.
+    """
     handler = logging.StreamHandler()
-    handler.setFormatter(JsonFormatter() if log_format == "json" else logging.Formatter(TEXT_FORMAT))
+    if log_format == "json":
+        handler.setFormatter(JsonFormatter())
+    else:
+        label = "" if worker is None else f"[worker {worker}] "
+        handler.setFormatter(logging.Formatter(TEXT_FORMAT.replace("%(name)s", label + "%(name)s")))
+    if worker is not None:
+        handler.addFilter(_WorkerField(worker))
     logging.basicConfig(level=level.upper(), handlers=[handler])
+
+
+class _WorkerField(logging.Filter):
+    """Adds the worker's number to every record (the JSON formatter writes it as a field)."""
+
+    def __init__(self, worker: int) -> None:
+        super().__init__()
+        self._worker = worker
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.worker = self._worker
+        return True

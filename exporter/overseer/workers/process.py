@@ -77,7 +77,7 @@ class _Worker:
 def run_worker(config: Config, worker: int, workers: int, requests: Connection, events: Connection) -> None:
     """The worker process: start following its robots, then answer requests until the exporter leaves."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the exporter decides
-    configure_logging(config.log_level, config.log_format)
+    configure_logging(config.log_level, config.log_format, worker)
     config = worker_config(config, worker, workers)
     try:
         running = _start(config, events)
