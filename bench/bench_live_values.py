@@ -1,17 +1,18 @@
 """Live values at fleet scale: every status changes at every publication, through ingest workers.
 
 Robots publish over Zenoh through one router (a router-mode session in its own process) exactly as
-rmw_zenoh does, with `--vary-values all`: each of a robot's statuses carries a reading that changes at
-every publication, so no status repeats the one before and the ingest's unchanged-status shortcut never
-applies. One simulator process per 2,500 robots publishes at 1 Hz for the given time, after the
-exporter's subscription matches.
+rmw_zenoh does (or, with `--transport dds`, over DDS on loopback), with `--vary-values all`: each of a
+robot's statuses carries a reading that changes at every publication, so no status repeats the one
+before and the ingest's unchanged-status shortcut never applies. One simulator process per 2,500 robots
+publishes at 1 Hz for the given time, after the exporter's subscription matches.
 
-Per fleet size: lost updates (published minus received), the exporter's CPU (its process and its ingest
-workers, from the first message to the end), its resident memory (all its processes), the time one
-scrape of /metrics takes while the fleet publishes, and the publishers' CPU, which competes with the
-exporter for this machine's cores. The smallest fleet also runs with one worker, in the same run, for
-the ratio the workers bring. `statuses per exporter core-second` is what one core ingests; times the
-cores of a bigger server it predicts the fleet that server keeps up with.
+Per fleet size: lost updates (published minus received over the whole run), the exporter's CPU (its
+process and its ingest workers) over the first 60 % of the run, with no scrape, its resident memory (all
+its processes), how long a scrape of /metrics takes in the rest of the run (one every 3 s: every series
+changed since the last), and the publishers' CPU, which competes with the exporter for this machine's
+cores. The smallest fleet also runs with one worker, in the same run, for the ratio workers bring.
+`statuses per exporter core-second` is what one core ingests: times the cores of a bigger server, it
+predicts the fleet that server keeps up with.
 """
 
 from __future__ import annotations
@@ -32,18 +33,19 @@ from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from support.processes import running_exporter  # noqa: E402 - the test harness lives in tests/
+from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
+from support.processes import running_exporter  # noqa: E402
 from support.zenoh import exporter_args, running_router_process, simulator_args  # noqa: E402
 
 SIMULATOR_ROBOTS = 2500
 AGGREGATOR_GROUPS = 5  # the simulated aggregator adds a group status per 10 leaves (5 for 50)
 
 
-def received(url: str) -> float:
-    """overseer_messages_total of received Zenoh messages."""
+def received(url: str, transport: str) -> float:
+    """overseer_messages_total of messages received over `transport`."""
     with urllib.request.urlopen(url + "/metrics", timeout=120) as response:
         text = response.read().decode()
-    match = re.search(r'overseer_messages_total\{result="received",transport="zenoh"\} (\S+)', text)
+    match = re.search(rf'overseer_messages_total\{{result="received",transport="{transport}"\}} (\S+)', text)
     return float(match.group(1)) if match else 0.0
 
 
@@ -55,13 +57,18 @@ def scrape_seconds(url: str) -> float:
     return time.perf_counter() - started
 
 
-def run(robots: int, components: int, seconds: float, workers: int) -> list[Row]:
+def run(robots: int, components: int, seconds: float, workers: int, transport: str = "zenoh") -> list[Row]:
     """Publish `robots` x `components` live values at 1 Hz for `seconds` through `workers` workers."""
+    domain = fresh_domain_id()
     with (
         tempfile.TemporaryDirectory() as tmp,
         running_router_process(Path(tmp)) as (port, router),
         running_exporter(
-            Path(tmp), None, *exporter_args(port), f"--ingest.workers={workers}", "--log.level=warning"
+            Path(tmp),
+            domain if transport == "dds" else None,
+            *(exporter_args(port) if transport == "zenoh" else ()),
+            f"--ingest.workers={workers}",
+            "--log.level=warning",
         ) as exporter,
     ):
         pid = exporter.process.pid
@@ -73,7 +80,11 @@ def run(robots: int, components: int, seconds: float, workers: int) -> list[Row]
                     "-m",
                     "overseer.cli",
                     "simulate",
-                    *simulator_args(port),
+                    *(
+                        simulator_args(port)
+                        if transport == "zenoh"
+                        else (f"--domain={domain}", "--dds.loopback-only")
+                    ),
                     f"--robots={share}",
                     f"--namespace-prefix=s{index}/robot",
                     f"--components={components}",
@@ -90,7 +101,7 @@ def run(robots: int, components: int, seconds: float, workers: int) -> list[Row]
             )
             for index, share in enumerate(shares)
         ]
-        while received(exporter.url) == 0 and simulators[0].poll() is None:
+        while received(exporter.url, transport) == 0 and simulators[0].poll() is None:
             time.sleep(0.2)
         # Ingest alone first (no scrape: one renders every series, all changed), then scrapes every 3 s.
         window = 0.6 * seconds
@@ -113,12 +124,13 @@ def run(robots: int, components: int, seconds: float, workers: int) -> list[Row]
                 raise RuntimeError(f"simulator failed: {stdout[-2000:]} {stderr[-2000:]}")
             published += int(match.group(1))
         time.sleep(4)
-        got = received(exporter.url)
+        got = received(exporter.url, transport)
         rss = tree_resident_bytes(pid)
     lost = max(0.0, published - got)
     # The window's statuses: the fleet's rate, scaled by the share that arrived over the whole run.
     statuses = robots * (components + AGGREGATOR_GROUPS) * window * (got / published if published else 0.0)
-    label = f"{robots} robots x {components} live at 1 Hz, {workers} worker{'s' if workers > 1 else ''}"
+    plural = "s" if workers > 1 else ""
+    label = f"{transport}, {robots} robots x {components} live at 1 Hz, {workers} worker{plural}"
     return [
         Row("live values", f"{label}: messages published", published, "messages"),
         Row(
@@ -155,10 +167,11 @@ def main() -> None:
     parser.add_argument("--components", type=int, default=50)
     parser.add_argument("--seconds", type=float, default=20)
     parser.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    parser.add_argument("--transport", choices=["zenoh", "dds"], default="zenoh")
     options = parser.parse_args()
-    rows = run(options.robots[0], options.components, options.seconds, 1)
+    rows = run(options.robots[0], options.components, options.seconds, 1, options.transport)
     for robots in options.robots:
-        rows += run(robots, options.components, options.seconds, options.workers)
+        rows += run(robots, options.components, options.seconds, options.workers, options.transport)
     emit(rows)
 
 
