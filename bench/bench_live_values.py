@@ -21,7 +21,6 @@ import argparse
 import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,6 +28,7 @@ import urllib.request
 from pathlib import Path
 
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
+from bench.fleet_publishers import messages_published, start_publishers
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -37,7 +37,6 @@ from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives
 from support.processes import running_exporter  # noqa: E402
 from support.zenoh import exporter_args, running_router_process, simulator_args  # noqa: E402
 
-SIMULATOR_ROBOTS = 2500
 AGGREGATOR_GROUPS = 5  # the simulated aggregator adds a group status per 10 leaves (5 for 50)
 
 
@@ -72,35 +71,10 @@ def run(robots: int, components: int, seconds: float, workers: int, transport: s
         ) as exporter,
     ):
         pid = exporter.process.pid
-        shares = [min(SIMULATOR_ROBOTS, robots - first) for first in range(0, robots, SIMULATOR_ROBOTS)]
-        simulators = [
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "overseer.cli",
-                    "simulate",
-                    *(
-                        simulator_args(port)
-                        if transport == "zenoh"
-                        else (f"--domain={domain}", "--dds.loopback-only")
-                    ),
-                    f"--robots={share}",
-                    f"--namespace-prefix=s{index}/robot",
-                    f"--components={components}",
-                    "--warn=1",
-                    "--error=1",
-                    "--vary-values=all",
-                    "--wait-for-subscribers=900",
-                    f"--duration={seconds}",
-                    "--log.level=warning",
-                ],
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
-            for index, share in enumerate(shares)
-        ]
+        transport_args = (
+            simulator_args(port) if transport == "zenoh" else (f"--domain={domain}", "--dds.loopback-only")
+        )
+        simulators = start_publishers(robots, components, seconds, transport_args, "all")
         while received(exporter.url, transport) == 0 and simulators[0].poll() is None:
             time.sleep(0.2)
         # Ingest alone first (no scrape: one renders every series, all changed), then scrapes every 3 s.
@@ -116,13 +90,7 @@ def run(robots: int, components: int, seconds: float, workers: int, transport: s
         while all(simulator.poll() is None for simulator in simulators):
             scrapes.append(scrape_seconds(exporter.url))
             time.sleep(max(0.0, 3.0 - scrapes[-1]))
-        published = 0
-        for simulator in simulators:
-            stdout, stderr = simulator.communicate(timeout=seconds + 1800)
-            match = re.search(r"published (\d+) messages", stdout)
-            if simulator.returncode != 0 or match is None:
-                raise RuntimeError(f"simulator failed: {stdout[-2000:]} {stderr[-2000:]}")
-            published += int(match.group(1))
+        published = messages_published(simulators, seconds + 1800)
         time.sleep(4)
         got = received(exporter.url, transport)
         rss = tree_resident_bytes(pid)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -21,6 +20,7 @@ import urllib.request
 from pathlib import Path
 
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
+from bench.fleet_publishers import messages_published, start_publishers
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -28,8 +28,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
 from support.processes import running_exporter  # noqa: E402
 from support.zenoh import exporter_args, running_router_process, simulator_args  # noqa: E402
-
-SIMULATOR_ROBOTS = 2500
 
 
 def counted(url: str, transport: str, result: str) -> float:
@@ -57,32 +55,7 @@ def run(transport: str, robots: int, components: int, seconds: float) -> list[Ro
         ) as exporter,
     ):
         pid = exporter.process.pid
-        # One simulator process per 2,500 robots: one Python process cannot build and send more at 1 Hz.
-        shares = [min(SIMULATOR_ROBOTS, robots - first) for first in range(0, robots, SIMULATOR_ROBOTS)]
-        simulators = [
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "overseer.cli",
-                    "simulate",
-                    *publish(port),
-                    f"--robots={share}",
-                    f"--namespace-prefix=s{index}/robot",
-                    f"--components={components}",
-                    "--warn=1",
-                    "--error=1",
-                    "--vary-values",
-                    "--wait-for-subscribers=900",
-                    f"--duration={seconds}",
-                    "--log.level=warning",
-                ],
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
-            for index, share in enumerate(shares)
-        ]
+        simulators = start_publishers(robots, components, seconds, publish(port), "battery")
         # CPU is measured from the first message received to the end: subscribing to the fleet is not ingest.
         while counted(exporter.url, transport, "received") == 0 and simulators[0].poll() is None:
             time.sleep(0.2)
@@ -91,13 +64,7 @@ def run(transport: str, robots: int, components: int, seconds: float) -> list[Ro
             tree_cpu_seconds(pid),
             cpu_seconds(router.process.pid),
         )
-        published = 0
-        for simulator in simulators:
-            stdout, stderr = simulator.communicate(timeout=seconds + 1800)
-            match = re.search(r"published (\d+) messages", stdout)
-            if simulator.returncode != 0 or match is None:
-                raise RuntimeError(f"simulator failed: {stdout[-2000:]} {stderr[-2000:]}")
-            published += int(match.group(1))
+        published = messages_published(simulators, seconds + 1800)
         time.sleep(4)
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
