@@ -16,8 +16,11 @@ from pathlib import Path
 import pytest
 
 from overseer.config import Config, DdsConfig, DomainConfig, EventsConfig, IngestConfig
+from overseer.model.shard import Shard
+from overseer.serve.exposition import ExpositionAssembler
 from overseer.workers import pool as pool_module
-from overseer.workers.pool import WorkerPool
+from overseer.workers.pool import WorkerPool, WorkersUnavailable
+from overseer.workers.view import PooledSnapshots, PooledView
 from support.nagios import run_check
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.zenoh import exporter_args, running_router, simulator_args
@@ -113,6 +116,8 @@ def test_a_killed_worker_is_restarted_and_its_robots_relearned(tmp_path: Path, d
         running_simulator(tmp_path, dds_domain, f"--robots={ROBOTS}", f"--components={COMPONENTS}"),
     ):
         wait_for(lambda: every_robot_once(exporter, expected), 30, message="every robot once")
+        received = ("overseer_messages_total", (("result", "received"), ("transport", "dds")))
+        received_before = exporter.samples()[received[0]][received[1]]
         before = set(worker_pids(exporter))
         victim = min(before)
         os.kill(victim, signal.SIGKILL)
@@ -127,10 +132,12 @@ def test_a_killed_worker_is_restarted_and_its_robots_relearned(tmp_path: Path, d
         assert sorted(restarts) == [0.0, 1.0]  # type: ignore[type-var]
         assert all(worker_metric(exporter, "overseer_ingest_worker_up", index) == 1.0 for index in range(2))
         assert "exited with code -9; restarting it" in exporter.log()
+        # The exporter-wide counters carry the dead worker's counts: Prometheus sees no reset.
+        assert exporter.samples()[received[0]][received[1]] > received_before
+        last_workers = worker_pids(exporter)
     assert exporter.process.returncode == 0
-    assert not [
-        pid for pid in before | set() if os.path.exists(f"/proc/{pid}") and pid != victim and _alive(pid)
-    ]
+    # Stopping the exporter stops its workers too.
+    wait_for(lambda: not any(_alive(pid) for pid in last_workers), 10, message="the workers gone")
 
 
 def _alive(pid: int) -> bool:
@@ -195,5 +202,29 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
         assert pool.pid(1) != hung
         assert len(pool.ask_all("robots")) == 2
         assert pool.restarts[0] == 0
+        # Stopped again: the API answers 503 for its robots, and the Icinga 2 push gets no partial fleet.
+        view = PooledView(pool, ExpositionAssembler(["dds"]))
+        owned_by_1 = next(f"robot{i}" for i in range(100) if Shard().for_worker(1, 2).owns(f"robot{i}"))
+        os.kill(pool.pid(1) or 0, signal.SIGSTOP)
+        with pytest.raises(WorkersUnavailable, match=f"ingest worker 1, which follows '{owned_by_1}'"):
+            view.robot_document(owned_by_1)
+        wait_for(lambda: pool.restarts[1] == 2 and pool.up(1), 20, message="restarted again")
+        os.kill(pool.pid(1) or 0, signal.SIGSTOP)
+        with pytest.raises(WorkersUnavailable, match=r"ingest worker \[1\] did not answer"):
+            PooledSnapshots(pool).snapshot()
+        wait_for(lambda: pool.restarts[1] == 3 and pool.up(1), 20, message="restarted a third time")
+        assert PooledSnapshots(pool).snapshot().robots == ()
     finally:
         pool.stop()
+
+
+def test_a_stop_sent_to_the_whole_process_group_restarts_no_worker(tmp_path: Path, dds_domain: int) -> None:
+    """As systemd stops a service (SIGTERM to every process of its cgroup): workers wait for the exporter."""
+    with running_exporter(tmp_path, dds_domain, "--ingest.workers=2") as exporter:
+        workers = worker_pids(exporter)
+        assert len(workers) == 2
+        os.killpg(exporter.process.pid, signal.SIGTERM)  # the exporter leads its own session and group
+        assert exporter.process.wait(20) == 0
+    wait_for(lambda: not any(_alive(pid) for pid in workers), 10, message="the workers gone")
+    assert "restarting it" not in exporter.log()
+    assert "restarted" not in exporter.log()

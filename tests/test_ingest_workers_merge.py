@@ -26,11 +26,16 @@ from overseer.serve.api import ComponentQuery, components_document, robot_docume
 from overseer.serve.exposition import ExpositionAssembler, FleetExposition
 from overseer.serve.metrics import FleetCollector
 from overseer.workers.merge import (
+    CounterCarry,
+    counters_part,
+    family_counters,
     merge_components_documents,
     merge_families,
     merge_robots_documents,
     merge_snapshots,
+    part_counters,
     portable_robots,
+    with_counters,
 )
 from overseer.workers.process import worker_config
 from support.strategies import arrays
@@ -265,3 +270,47 @@ def test_any_arrays_split_over_workers_serve_what_one_model_serves(
     assert joined | {"generated_at": 0.0} == components_document(fleet.whole.snapshot(), query) | {
         "generated_at": 0.0
     }
+
+
+def test_carried_counters_never_go_back_when_a_worker_restarts_or_misses_a_scrape() -> None:
+    carry = CounterCarry(2)
+    assert carry.totals([(0, 0, {("m",): 10}), (1, 0, {("m",): 5})]) == {("m",): 15}
+    assert carry.totals([(0, 0, {("m",): 12})]) == {("m",): 17}  # worker 1 missed it: its last 5 held
+    # Worker 1 restarted (generation 1): its counters start from zero, its old 5 stay in the base.
+    assert carry.totals([(0, 0, {("m",): 13}), (1, 1, {("m",): 2, ("e",): 1})]) == {("m",): 20, ("e",): 1}
+    # Answers of two concurrent scrapes may be joined in the other order: the larger value holds.
+    assert carry.totals([(0, 0, {("m",): 12}), (1, 1, {("m",): 3})]) == {("m",): 21, ("e",): 1}
+
+
+def test_joined_exposition_counters_survive_a_restarted_worker() -> None:
+    fleet = varied_fleet(2)
+    pattern = re.compile(".*")
+    parts = [FleetExposition(model, pattern, ["dds"]).render_part() for model in fleet.parts]
+    carry = CounterCarry(2)
+    before = counters_part(carry.totals((i, 0, part_counters(p)) for i, p in enumerate(parts)))
+    restarted = FleetExposition(FleetModel(LIMITS, fleet.clock), pattern, ["dds"]).render_part()  # counts 0
+    after = counters_part(carry.totals([(0, 0, part_counters(parts[0])), (1, 1, part_counters(restarted))]))
+    assert after.message_counts == before.message_counts
+    assert after.dropped_statuses == before.dropped_statuses
+    assert sum(after.message_counts.values()) == sum(
+        sum(part.message_counts.values()) for part in parts
+    )  # nothing counted twice either
+
+
+def test_openmetrics_counters_carried_replace_the_summed_ones() -> None:
+    fleet = varied_fleet(2)
+    pattern = re.compile(".*")
+    answers = [list(FleetCollector(m, pattern, ["dds"]).collect()) for m in fleet.parts]
+    carry = CounterCarry(2)
+    totals = carry.totals((i, 0, family_counters(families)) for i, families in enumerate(answers))
+    merged = family_samples(with_counters(merge_families(answers), totals))
+    whole = family_samples(FleetCollector(fleet.whole, pattern, ["dds"]).collect())
+    assert merged == whole
+    empty = list(FleetCollector(FleetModel(LIMITS, fleet.clock), pattern, ["dds"]).collect())
+    restarted = [(0, 0, family_counters(answers[0])), (1, 1, family_counters(empty))]
+    assert (
+        family_samples(with_counters(merge_families([answers[0], empty]), carry.totals(restarted)))[
+            "overseer_messages"
+        ]
+        == whole["overseer_messages"]
+    )

@@ -131,6 +131,8 @@ class Exporter:
     def stop(self) -> None:
         """Stop serving and leave the transports."""
         self._stopping.set()
+        if self.pool is not None:
+            self.pool.prepare_stop()
         if self.icinga2_push is not None:
             self.icinga2_push.stop()
         self.server.shutdown()

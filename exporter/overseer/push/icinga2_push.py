@@ -22,6 +22,7 @@ from overseer.push.icinga2_config import Icinga2Config
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
+from overseer.serve.fleet_view import FleetPartUnavailable
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +102,11 @@ class Icinga2Push:
     def step(self) -> None:
         """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off."""
         now = self._clock()
-        self._queue(self._model.snapshot(), now)
+        try:
+            self._queue(self._model.snapshot(), now)
+        except FleetPartUnavailable as error:
+            # A robot missing from a partial snapshot is no robot gone: wait for the whole fleet.
+            log.info("Icinga 2 push: not queueing this tick, %s", error)
         if now >= self._retry_at:
             self._deliver(now)
         self.stats.set_pending(len(self._urgent) + len(self._pending))

@@ -9,6 +9,10 @@ from overseer.serve.api import ComponentQuery, components_document, robot_docume
 from overseer.serve.exposition import FleetExposition
 
 
+class FleetPartUnavailable(RuntimeError):
+    """Part of the fleet cannot be read now (an ingest worker is restarting): the endpoint answers 503."""
+
+
 class FleetView(Protocol):
     """The whole fleet as the endpoint serves it, however many processes hold it."""
 
@@ -21,7 +25,7 @@ class FleetView(Protocol):
         ...
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
-        """GET /api/v1/robots/<name>, or None for a robot nobody follows."""
+        """GET /api/v1/robots/<name>, or None for a robot nobody follows; `FleetPartUnavailable` meanwhile."""
         ...
 
     def components_document(self, query: ComponentQuery) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from overseer.history.query import QueryError, parse_event_query
 from overseer.history.store import EventStore, EventsUnavailable
 from overseer.serve.api import ComponentQueryError, parse_component_query
 from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
-from overseer.serve.fleet_view import FleetView
+from overseer.serve.fleet_view import FleetPartUnavailable, FleetView
 from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
@@ -239,7 +239,10 @@ class _Handler(BaseHTTPRequestHandler):
             return
         try:
             if self.server.security.authorized(self.headers.get("Authorization")):
-                self._route(head_only)
+                try:
+                    self._route(head_only)
+                except FleetPartUnavailable as error:
+                    self._json(503, {"error": f"part of the fleet is unavailable: {error}"}, head_only)
             else:
                 log.debug("basic auth refused for %s", self.address_string())
                 challenge = ("WWW-Authenticate", f'Basic realm="{REALM}"')

@@ -60,6 +60,8 @@ class ZenohSource:
         self._native = session_config(config)
         self._model = model
         self._shard = shard or Shard()
+        # Every ingest worker has a session and hears every key: what all of them see, the first counts.
+        self._counts_shared_errors = self._shard.worker == 0
         self._lock = threading.Lock()
         self._ingests: dict[tuple[str, str], PayloadIngest] = {}  # (robot, kind) → its topic's ingest
         # Every worker hears every robot's key: the others' are known by key, so they cost a set lookup.
@@ -125,7 +127,8 @@ class ZenohSource:
             try:
                 return zenoh.open(self._native)
             except zenoh.ZError as error:
-                self._model.count_source_error(TRANSPORT, "router_unreachable")
+                if self._counts_shared_errors:
+                    self._model.count_source_error(TRANSPORT, "router_unreachable")
                 log.warning("cannot open the Zenoh session (retrying in %gs): %s", delay, error)
             self._stop.wait(delay)
             delay = min(delay * 2, RETRY_MAX_SECONDS)
@@ -148,7 +151,8 @@ class ZenohSource:
             try:
                 parsed = parse_data_key(key, self._config.domain)
             except RejectedKey as rejected:
-                self._model.count_source_error(TRANSPORT, str(rejected))
+                if self._counts_shared_errors:
+                    self._model.count_source_error(TRANSPORT, str(rejected))
                 log.debug("ignoring Zenoh key %r: %s", key, rejected)
                 return
             robot = parsed.namespace or self._config.unnamespaced_robot

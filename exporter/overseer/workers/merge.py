@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import heapq
-from collections.abc import Iterable, Iterator, Sequence
+import threading
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
@@ -12,6 +13,7 @@ from prometheus_client.samples import Sample
 
 from overseer.levels import Level, severity_rank
 from overseer.model import FleetLimits, FleetSnapshot, RobotState
+from overseer.serve.exposition import FLEET_FAMILIES, ExpositionPart
 
 
 def merge_robots_documents(documents: Sequence[dict[str, Any]], generated_at: float) -> dict[str, Any]:
@@ -99,7 +101,7 @@ def merge_snapshots(parts: Sequence[FleetSnapshot], limits: FleetLimits, taken_a
     return FleetSnapshot(taken_at, limits, robots, counts, dropped, truncated, errors)
 
 
-def _add(total: dict[Any, int], counts: Any) -> None:
+def _add(total: dict[Any, Any], counts: Any) -> None:
     for key, count in counts.items():
         total[key] = total.get(key, 0) + count
 
@@ -116,3 +118,99 @@ def _with_components(robot: RobotState, components: Any) -> RobotState:
         robot.missing,
         robot.publisher_alive,
     )
+
+
+CounterKey = tuple[Any, ...]
+
+
+class CounterCarry:
+    """Keeps the workers' exporter-wide counters from going back when a worker restarts or misses a scrape.
+
+    Prometheus takes any drop of a counter for a reset: a restarted worker's counters start again from
+    zero, and a worker that cannot answer one scrape would leave its share out. So the exporter keeps each
+    worker's last counters, serves them while it does not answer, and adds them to a base once the worker
+    answers as a new process (a new generation).
+    """
+
+    def __init__(self, workers: int) -> None:
+        """Counters of `workers` workers, none seen yet."""
+        self._base: list[dict[CounterKey, float]] = [{} for _ in range(workers)]
+        self._last: list[dict[CounterKey, float]] = [{} for _ in range(workers)]
+        self._generation = [0] * workers
+        self._lock = threading.Lock()
+
+    def totals(
+        self, answers: Iterable[tuple[int, int, Mapping[CounterKey, float]]]
+    ) -> dict[CounterKey, float]:
+        """The fleet's counters given (worker, generation, its counters) of the workers that answered."""
+        with self._lock:
+            for worker, generation, counts in answers:
+                last = self._last[worker]
+                if generation != self._generation[worker]:
+                    _add(self._base[worker], last)
+                    last = self._last[worker] = {}
+                    self._generation[worker] = generation
+                for key, value in counts.items():  # the larger: answers of concurrent scrapes may cross
+                    if value >= last.get(key, 0):
+                        last[key] = value
+            totals: dict[CounterKey, float] = {}
+            for base, last in zip(self._base, self._last, strict=True):
+                _add(totals, base)
+                _add(totals, last)
+            return totals
+
+
+def part_counters(part: ExpositionPart) -> dict[CounterKey, float]:
+    """An exposition part's counters under one kind of key."""
+    counts: dict[CounterKey, float] = {
+        ("messages", *key): value for key, value in part.message_counts.items()
+    }
+    counts.update({("dropped", reason): value for reason, value in part.dropped_statuses.items()})
+    counts.update({("errors", *key): value for key, value in part.source_errors.items()})
+    counts[("truncated",)] = part.truncated_strings
+    return counts
+
+
+def counters_part(counts: Mapping[CounterKey, float]) -> ExpositionPart:
+    """An exposition part with no series, carrying `counts` (as `part_counters` keys them)."""
+    messages, dropped, errors, truncated = {}, {}, {}, 0
+    for key, value in counts.items():
+        if key[0] == "messages":
+            messages[key[1:]] = int(value)
+        elif key[0] == "dropped":
+            dropped[key[1]] = int(value)
+        elif key[0] == "errors":
+            errors[key[1:]] = int(value)
+        else:
+            truncated = int(value)
+    return ExpositionPart(0, (b"",) * len(FLEET_FAMILIES), messages, dropped, truncated, errors)
+
+
+EXPORTER_COUNTERS = (
+    "overseer_messages",
+    "overseer_statuses_dropped",
+    "overseer_strings_truncated",
+    "overseer_source_errors",
+)
+
+
+def family_counters(families: Iterable[Metric]) -> dict[CounterKey, float]:
+    """The exporter-wide counters among collected families, keyed by family, sample name and labels."""
+    return {
+        (family.name, sample.name, tuple(sorted(sample.labels.items()))): sample.value
+        for family in families
+        if family.name in EXPORTER_COUNTERS
+        for sample in family.samples
+    }
+
+
+def with_counters(families: Iterable[Metric], counts: Mapping[CounterKey, float]) -> Iterator[Metric]:
+    """`families` with the exporter-wide counters' samples replaced by `counts` (keyed as family_counters)."""
+    for family in families:
+        if family.name in EXPORTER_COUNTERS:
+            family.samples = [
+                Sample(name, dict(labels), value)
+                for (owner, name, labels), value in sorted(counts.items())
+                if owner == family.name
+            ]
+        yield family

@@ -14,10 +14,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
-from typing import Any
+from typing import Any, NamedTuple
 
 from overseer.config import Config
 from overseer.history.events import Event
+from overseer.serve.fleet_view import FleetPartUnavailable
 from overseer.workers.process import FAILED, READY, run_worker
 
 log = logging.getLogger(__name__)
@@ -30,6 +31,18 @@ RESTART_DELAY_SECONDS = 1.0  # at most one restart a second per worker, so a cra
 EventSink = Callable[[list[Event]], None]
 
 
+class Answer(NamedTuple):
+    """One worker's answer: which worker, which of its incarnations (restarts so far), and the value."""
+
+    worker: int
+    generation: int
+    value: Any
+
+
+class WorkersUnavailable(FleetPartUnavailable):
+    """Some worker could not answer (it is restarting or hung): its part of the fleet is unknown now."""
+
+
 class WorkerStartError(RuntimeError):
     """A worker could not start (a bad DDS or Zenoh configuration, say); the message says why."""
 
@@ -39,6 +52,7 @@ class _Handle:
     """One worker's process and pipes; replaced whole when the worker is restarted."""
 
     index: int
+    generation: int  # how many times this worker was restarted before this process
     process: BaseProcess
     requests: Connection
     events: Connection
@@ -71,11 +85,15 @@ class WorkerPool:
         self._supervisor.start()
         log.info("ingesting with %d worker processes", self.count)
 
+    def prepare_stop(self) -> None:
+        """Restart no worker from now on: the exporter is stopping (and may see its workers end first)."""
+        self._stopping.set()
+
     def stop(self) -> None:
         """Stop the workers: they leave their transports when their request pipe closes."""
         self._stopping.set()
         if self._supervisor is not None:
-            self._supervisor.join(timeout=5)
+            self._supervisor.join()  # a restart under way sees `_stopping` within a poll slice
         handles = [handle for handle in self._handles if handle is not None]
         for handle in handles:
             with handle.lock:
@@ -97,26 +115,43 @@ class WorkerPool:
         handle = self._handles[index]
         return None if handle is None else handle.process.pid
 
-    def ask_all(self, kind: str, argument: Any = None) -> list[Any]:
+    def ask_all(self, kind: str, argument: Any = None) -> list[Answer]:
         """Every worker's answer to one request, asked of all at once; a worker that fails gives none."""
         handles = [handle for handle in self._handles if handle is not None and handle.ready]
-        asked = []
-        for handle in handles:
-            handle.lock.acquire()
-            try:
-                handle.requests.send((kind, argument))
-                asked.append(handle)
-            except (OSError, ValueError):
-                handle.lock.release()
-                self._fail(handle, "its request pipe is closed")
+        asked: list[_Handle] = []
         answers = []
-        for handle in asked:
-            try:
-                answer = self._receive(handle, kind)
-            finally:
+        try:
+            for handle in handles:
+                handle.lock.acquire()
+                try:
+                    handle.requests.send((kind, argument))
+                    asked.append(handle)
+                except (OSError, ValueError):
+                    handle.lock.release()
+                    self._fail(handle, "its request pipe is closed")
+            while asked:
+                handle = asked[0]
+                try:
+                    answer = self._receive(handle, kind)
+                finally:
+                    asked.pop(0)
+                    handle.lock.release()
+                if answer is not None:
+                    answers.append(Answer(handle.index, handle.generation, answer[0]))
+        finally:
+            for handle in asked:  # an unexpected error left these unread: their answers are lost, so are they
+                self._fail(handle, f"its answer to {kind!r} was not read")
                 handle.lock.release()
-            if answer is not None:
-                answers.append(answer[0])
+        return answers
+
+    def ask_every(self, kind: str, argument: Any = None) -> list[Answer]:
+        """Every worker's answer, or `WorkersUnavailable` when one cannot give it (restarting, hung)."""
+        answers = self.ask_all(kind, argument)
+        if len(answers) < self.count:
+            missing = sorted(set(range(self.count)) - {answer.worker for answer in answers})
+            raise WorkersUnavailable(
+                f"ingest worker{'s' if len(missing) > 1 else ''} {missing} did not answer"
+            )
         return answers
 
     def ask(self, index: int, kind: str, argument: Any = None) -> tuple[Any] | None:
@@ -167,7 +202,7 @@ class WorkerPool:
         process.start()
         child_requests.close()
         child_events.close()
-        handle = _Handle(index, process, requests, events)
+        handle = _Handle(index, self.restarts[index], process, requests, events)
         self._handles[index] = handle
         threading.Thread(
             target=self._relay_events, args=(handle,), name=f"events-{index}", daemon=True
@@ -199,7 +234,10 @@ class WorkerPool:
                 handle.events.close()
                 return
             if self._events is not None:
-                self._events(batch)
+                try:
+                    self._events(batch)
+                except Exception:  # keep reading, or the worker's queue of events would grow for good
+                    log.exception("events of ingest worker %d could not be stored", handle.index)
 
     def _supervise(self) -> None:
         while not self._stopping.wait(SUPERVISE_INTERVAL_SECONDS):
@@ -219,6 +257,8 @@ class WorkerPool:
                     self._restart(index, handle)
 
     def _restart(self, index: int, dead: _Handle) -> None:
+        if self._stopping.is_set():
+            return
         with dead.lock:
             dead.ready = False
             dead.requests.close()  # its events pipe is closed by its relay thread, at end of file

@@ -76,7 +76,10 @@ class _Worker:
 
 def run_worker(config: Config, worker: int, workers: int, requests: Connection, events: Connection) -> None:
     """The worker process: start following its robots, then answer requests until the exporter leaves."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the exporter decides
+    # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
+    # and a worker ends when the exporter closes its pipe (or dies).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     configure_logging(config.log_level, config.log_format, worker)
     config = worker_config(config, worker, workers)
     try:
