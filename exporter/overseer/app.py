@@ -12,13 +12,12 @@ from overseer.codec import compiled
 from overseer.config import Config
 from overseer.history.service import EventHistory, TransitionWatch
 from overseer.model import FleetModel
+from overseer.model.expiry import start_expiry
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import FleetSource, Icinga2Push
-from overseer.serve.exposition import ExpositionAssembler, FleetExposition
-from overseer.serve.fleet_view import FleetView, ModelView
+from overseer.serve.exposition import ExpositionAssembler
+from overseer.serve.fleet_view import FleetView, ModelView, model_renderers
 from overseer.serve.http import OverseerServer
-from overseer.serve.message_labels import MessageLabels
-from overseer.serve.metrics import FleetCollector
 from overseer.serve.web_config import load_web_config
 from overseer.sources import Source, build_sources, enabled_transports
 from overseer.workers.metrics import WorkerPoolCollector
@@ -26,8 +25,6 @@ from overseer.workers.pool import WorkerPool, WorkerStartError
 from overseer.workers.view import PooledCollector, PooledSnapshots, PooledView
 
 log = logging.getLogger(__name__)
-
-EXPIRY_INTERVAL_SECONDS = 1.0
 
 
 @dataclass
@@ -52,10 +49,7 @@ class Exporter:
         config = self.config
         if config.events.enabled:
             self.history = EventHistory(config.events, config.log_format == "json")
-        registry = CollectorRegistry(auto_describe=True)
         transports = enabled_transports(config)
-        metrics, external_url = config.metrics, config.web.external_url
-        messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
         extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
         fleet: FleetSource
         if config.ingest.workers == 1:
@@ -63,36 +57,28 @@ class Exporter:
             self.sources = build_sources(config, model)
             if self.history is not None:
                 self._watch = TransitionWatch(model, self.history.store.add)
-            registry.register(
-                FleetCollector(
-                    model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
-                )
-            )
             fleet = model
         else:
             self.pool = WorkerPool(config, None if self.history is None else self.history.store.add)
-            registry.register(PooledCollector(self.pool))
             extra_collectors.append(WorkerPoolCollector(self.pool))
             fleet = PooledSnapshots(self.pool)
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(config.icinga2, fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
-        for collector in extra_collectors:
-            registry.register(collector)
+        # The registry renders the fleet first, then the extras: as the fast exposition appends them.
+        registry = CollectorRegistry(auto_describe=True)
         view: FleetView
         if self.model is not None:
-            exposition = FleetExposition(
-                self.model,
-                metrics.value_key_pattern,
-                transports,
-                extra_collectors,
-                messages=messages,
-                external_url=external_url,
-            )
+            collector, exposition = model_renderers(self.model, config, transports, extra_collectors)
+            registry.register(collector)
             view = ModelView(self.model, exposition)
         else:
             assert self.pool is not None
+            registry.register(PooledCollector(self.pool))
+            external_url = config.web.external_url
             view = PooledView(self.pool, ExpositionAssembler(transports, extra_collectors, external_url))
+        for extra in extra_collectors:
+            registry.register(extra)
         security = load_web_config(config.web.config_file)
         self.server = OverseerServer(config.web.host_and_port, view, registry, security)
         self.server.events = self.history.store if self.history is not None else None
@@ -117,8 +103,8 @@ class Exporter:
                 if self.history is not None:
                     self.history.stop()
                 raise
-        else:
-            threading.Thread(target=self._expire_loop, name="expiry", daemon=True).start()
+        elif self.model is not None:
+            start_expiry(self.model, self._stopping)
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
         if compiled.enabled:
@@ -145,9 +131,3 @@ class Exporter:
             self._watch.stop()
         if self.history is not None:
             self.history.stop()
-
-    def _expire_loop(self) -> None:
-        assert self.model is not None
-        while not self._stopping.wait(EXPIRY_INTERVAL_SECONDS):
-            for robot in self.model.expire():
-                log.info("forgot robot %s after %gs of silence", robot, self.config.fleet.expire_after)

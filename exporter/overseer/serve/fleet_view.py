@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, Protocol
 
+from prometheus_client.registry import Collector
+
+from overseer.config import Config
 from overseer.model import FleetModel
 from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.message_labels import MessageLabels
+from overseer.serve.metrics import FleetCollector
 
 
 class FleetPartUnavailable(RuntimeError):
@@ -58,3 +64,18 @@ class ModelView:
     def components_document(self, query: ComponentQuery) -> dict[str, Any]:
         """The components matching `query`."""
         return components_document(self.model.snapshot(), query)
+
+
+def model_renderers(
+    model: FleetModel, config: Config, transports: Iterable[str], extra_collectors: Iterable[Collector] = ()
+) -> tuple[FleetCollector, FleetExposition]:
+    """The two renderings of `model` the metrics config asks for: prometheus-client's, and the fast one."""
+    metrics, external_url = config.metrics, config.web.external_url
+    messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
+    transports = tuple(transports)
+    pattern = metrics.value_key_pattern
+    collector = FleetCollector(model, pattern, transports, messages=messages, external_url=external_url)
+    exposition = FleetExposition(
+        model, pattern, transports, extra_collectors, messages=messages, external_url=external_url
+    )
+    return collector, exposition

@@ -19,16 +19,16 @@ from overseer.history.events import Event
 from overseer.history.service import TransitionWatch
 from overseer.log_format import configure_logging
 from overseer.model import FleetModel
+from overseer.model.expiry import start_expiry
 from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
 from overseer.serve.exposition import FleetExposition
-from overseer.serve.message_labels import MessageLabels
+from overseer.serve.fleet_view import model_renderers
 from overseer.serve.metrics import FleetCollector
 from overseer.sources import Source, build_sources, enabled_transports
 from overseer.workers.merge import portable_robots
 
 log = logging.getLogger(__name__)
 
-EXPIRY_INTERVAL_SECONDS = 1.0
 READY = "ready"
 FAILED = "failed"
 
@@ -89,7 +89,7 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
         requests.send((FAILED, f"{type(error).__name__}: {error}"))
         return
     requests.send((READY, None))
-    threading.Thread(target=_expire_loop, args=(running.model,), name="expiry", daemon=True).start()
+    start_expiry(running.model, threading.Event())
     while True:
         try:
             kind, argument = requests.recv()
@@ -111,15 +111,7 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
 def _start(config: Config, events: Connection) -> _Worker:
     model = FleetModel(config.fleet)
     sources = build_sources(config, model)
-    metrics, external_url = config.metrics, config.web.external_url
-    messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
-    transports = enabled_transports(config)
-    exposition = FleetExposition(
-        model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
-    )
-    collector = FleetCollector(
-        model, metrics.value_key_pattern, transports, messages=messages, external_url=external_url
-    )
+    collector, exposition = model_renderers(model, config, enabled_transports(config))
     watch = TransitionWatch(model, _EventSender(events).send) if config.events.enabled else None
     if watch is not None:
         watch.start()  # before the transports, so that it sees their first messages
@@ -149,10 +141,3 @@ class _EventSender:
                 self._connection.send(batch)
             except (BrokenPipeError, OSError):
                 return  # the exporter is gone; the request loop ends the worker
-
-
-def _expire_loop(model: FleetModel) -> None:
-    stop = threading.Event()
-    while not stop.wait(EXPIRY_INTERVAL_SECONDS):
-        for robot in model.expire():
-            log.info("forgot robot %s after %gs of silence", robot, model.limits.expire_after)
