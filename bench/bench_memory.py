@@ -14,6 +14,7 @@ from bench.common import Row, emit, resident_bytes
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition import FleetExposition
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from overseer.sources.ingest import PayloadIngest
@@ -27,7 +28,8 @@ def main() -> None:
     leaves = leaf_components(LEAVES)
     statuses = tuple(aggregated_statuses(leaves, initial_levels(leaves, 2, 2), set()))
     model = FleetModel(FleetLimits(max_robots=ROBOTS))
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    exposition = FleetExposition(model, re.compile(".*"))
+    assembler = ExpositionAssembler(["dds"])
     gc.collect()
     before = resident_bytes()
     ingests = [
@@ -38,7 +40,7 @@ def main() -> None:
     for second in range(3):
         for robot, ingest in enumerate(ingests):
             ingest(payload(statuses, f"{11 + robot / ROBOTS + second / 100:.5f}", second))
-        exposition.render()
+        assembler.assemble([exposition.render_part()])
     gc.collect()
     components = sum(len(r.components) for r in model.snapshot().robots)
     per_component = (resident_bytes() - before) / components

@@ -19,12 +19,12 @@ import urllib.request
 from pathlib import Path
 
 from playwright.sync_api import Browser
-from prometheus_client.registry import CollectorRegistry
 
 from bench.common import Row, emit
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
@@ -83,8 +83,8 @@ def measure(browser: Browser, robots: int) -> dict[str, float]:
     """Figures of one fleet size: page first renders, and the JSON the page reads."""
     model = FleetModel(FleetLimits(max_robots=100_000, stale_after=3600, robot_timeout=3600))
     fill(model, robots)
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
-    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition), CollectorRegistry())
+    view = ModelView(model, FleetExposition(model, re.compile(".*")), ExpositionAssembler(["dds"]))
+    server = OverseerServer(("127.0.0.1", 0), view)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         figures = {

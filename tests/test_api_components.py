@@ -11,7 +11,6 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from prometheus_client.registry import CollectorRegistry
 
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
@@ -24,6 +23,7 @@ from overseer.serve.api import (
     parse_component_query,
     robots_document,
 )
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
@@ -179,8 +179,8 @@ def test_bad_parameters_are_refused_naming_the_parameter_and_value(
 def server(fleet: tuple[FleetModel, ManualClock]) -> Iterator[OverseerServer]:
     """The real HTTP server over the fleet, on a free loopback port."""
     model = fleet[0]
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
-    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition), CollectorRegistry())
+    exposition = FleetExposition(model, re.compile(".*"))
+    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition, ExpositionAssembler(["dds"])))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:

@@ -15,11 +15,13 @@ from urllib.parse import quote, urlencode
 
 import bcrypt
 import pytest
-from prometheus_client import generate_latest
 
 from overseer.app import Exporter
 from overseer.config import config_from_dict
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT
+from overseer.sources import enabled_transports
+from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
 from support.ports import free_port
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "</script><b>", "tab\there", "\u2028sep"]
@@ -191,9 +193,13 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
     with exporter(tmp_path) as running:
         publish(running, "robot1", (0, "/a", "ok"), (1, "/b", "warm"))
         publish(running, "robot1", (2, "/a", "bad"), (1, "/b", "warm"))
-        fast = running.server.view.metrics_text()
-        reference = generate_latest(running.server.registry)
-    assert fast == reference
+        assert running.model is not None and running.history is not None
+        oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
+        registry = oracle_registry(oracle, running.history.collector)
+        for fmt in (TEXT, OPENMETRICS):
+            fast = running.server.view.metrics(fmt)
+            assert fast == (oracle_openmetrics(registry) if fmt.openmetrics else oracle_text(registry))
+        fast = running.server.view.metrics(TEXT)
     text = fast.decode()
     assert "overseer_events_written_total 3.0" in text
     assert re.search(r"^overseer_events_database_bytes [1-9][0-9.e+]*$", text, re.MULTILINE)

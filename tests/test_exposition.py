@@ -1,21 +1,17 @@
-"""The fast text exposition renders exactly what prometheus-client renders from the collector."""
+"""The cached exposition renders exactly what prometheus-client renders from the oracle, in both formats."""
 
 from __future__ import annotations
-
-import re
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from prometheus_client import generate_latest
-from prometheus_client.registry import CollectorRegistry
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve import exposition as exposition_module
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MESSAGE_LABEL_MODES, MessageLabels
-from overseer.serve.metrics import FleetCollector
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT
+from overseer.serve.message_labels import MESSAGE_LABEL_MODES, MessageLabels
+from support.rendering import FORMATS, Rendering
 
 
 class Clock:
@@ -63,19 +59,12 @@ def fleet() -> tuple[FleetModel, Clock]:
     return model, clock
 
 
-def both(
-    model: FleetModel,
-    exposition: FleetExposition,
-    value_keys: str = ".*",
-    messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
-    external_url: str | None = None,
-) -> tuple[bytes, bytes]:
-    registry = CollectorRegistry()
-    collector = FleetCollector(
-        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
-    )
-    registry.register(collector)
-    return exposition.render(), generate_latest(registry)
+def assert_equal_in_both_formats(rendering: Rendering) -> bytes:
+    """Production's text and OpenMetrics equal the oracle's; returns the text."""
+    for fmt in FORMATS:
+        fast, reference = rendering.both(fmt)
+        assert fast == reference, fmt
+    return rendering.fast(TEXT)
 
 
 @pytest.mark.parametrize(
@@ -87,19 +76,12 @@ def both(
         (".*", MessageLabels("none"), "http://127.0.0.1:9849"),
     ],
 )
-def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(
+def test_fast_exposition_equals_the_oracle_in_both_formats_through_changes_staleness_and_expiry(
     value_keys: str, messages: MessageLabels, external_url: str | None
 ) -> None:
     model, clock = fleet()
-    exposition = FleetExposition(
-        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
-    )
-
-    def both_now() -> tuple[bytes, bytes]:
-        return both(model, exposition, value_keys, messages, external_url)
-
-    fast, reference = both_now()
-    assert fast == reference
+    rendering = Rendering(model, value_keys, messages=messages, external_url=external_url)
+    fast = assert_equal_in_both_formats(rendering)
     # 8 robots of 13 components; the first component of robots 0 and 4 is the only one at OK.
     assert (
         fast.count(b"ros_diagnostics_status_message{")
@@ -119,44 +101,42 @@ def test_fast_exposition_equals_collector_through_changes_staleness_and_expiry(
     ]
     for step in steps:
         step()
-        fast, reference = both_now()
-        assert fast == reference
+        assert_equal_in_both_formats(rendering)
 
 
 def test_a_lost_publisher_renders_its_robot_down_and_a_returning_one_up() -> None:
     model, _ = fleet()
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    rendering = Rendering(model)
     robot = 'robot0/quote"d'
     label = b'ros_diagnostics_robot_up{robot="robot0/quote\\"d"} '
-    assert label + b"1.0" in exposition.render()
+    assert label + b"1.0" in rendering.fast()
     model.set_publisher_alive(robot, False)
-    fast, reference = both(model, exposition)
-    assert fast == reference and label + b"0.0" in fast
+    fast = assert_equal_in_both_formats(rendering)
+    assert label + b"0.0" in fast
     assert b'ros_diagnostics_level{component="/Motor",hardware_id="m1",robot="robot0/quote\\"d"} 3.0' in fast
     model.set_publisher_alive(robot, True)
-    fast, reference = both(model, exposition)
-    assert fast == reference and label + b"1.0" in fast
+    assert label + b"1.0" in assert_equal_in_both_formats(rendering)
 
 
 def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     model, _ = fleet()
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
-    exposition.render()
-    cached = dict(exposition._robots)
+    rendering = Rendering(model)
+    rendering.fast(TEXT)
+    cached = dict(rendering.exposition._robots)
     model.touch('robot0/quote"d', "dds")
-    exposition.render()
-    assert all(exposition._robots[name] is lines for name, lines in cached.items())
+    rendering.fast(OPENMETRICS)  # the same cached lines serve either format
+    assert all(rendering.exposition._robots[name] is lines for name, lines in cached.items())
 
 
 def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     model, _ = fleet()
-    exposition = FleetExposition(model, re.compile(".*"), ["dds"])
+    rendering = Rendering(model)
     robot = "robot9"
     three = tuple(DiagnosticStatus(0, f"/c{i}", "ok", "", (("v", str(i)),)) for i in range(3))
     model.apply(robot, DiagnosticArray(0, 0, "", three), "dds")
-    exposition.render()
+    rendering.fast()
     rendered: list[bytes] = []
     original_add = exposition_module._LinesBuilder.add
 
@@ -167,9 +147,10 @@ def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
     monkeypatch.setattr(exposition_module._LinesBuilder, "add", counting_add)
     changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
     model.apply(robot, DiagnosticArray(0, 0, "", changed), "dds")
-    fast, reference = both(model, exposition)
+    fast, reference = rendering.both(TEXT)
     assert fast == reference
     assert len(rendered) == 1 and b'component="/c1"' in rendered[0]
+    assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and len(rendered) == 1
 
 
 # Property: through any sequence of model changes, the cached exposition equals the collector's.
@@ -205,14 +186,12 @@ _steps = st.one_of(
     ),
     external_url=st.sampled_from([None, "http://127.0.0.1:9849", 'https://x/"\\\n']),
 )
-def test_cached_exposition_equals_collector_through_any_changes(
+def test_cached_exposition_equals_the_oracle_in_both_formats_through_any_changes(
     steps: list[tuple[object, ...]], messages: MessageLabels, external_url: str | None
 ) -> None:
     clock = Clock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
-    exposition = FleetExposition(
-        model, re.compile(".*"), ["dds"], messages=messages, external_url=external_url
-    )
+    rendering = Rendering(model, messages=messages, external_url=external_url)
     for step in steps:
         match step:
             case ("apply", str(robot), tuple(statuses)):
@@ -227,8 +206,7 @@ def test_cached_exposition_equals_collector_through_any_changes(
                 model.forget_topic(robot, "t")
             case ("alive", str(robot), bool(alive)):
                 model.set_publisher_alive(robot, alive)
-        fast, reference = both(model, exposition, messages=messages, external_url=external_url)
-        assert fast == reference
+        assert_equal_in_both_formats(rendering)
 
 
 def test_fast_exposition_with_the_icinga2_push_metrics_equals_the_registry_with_both_collectors() -> None:
@@ -240,11 +218,6 @@ def test_fast_exposition_with_the_icinga2_push_metrics_equals_the_registry_with_
     stats.failed("http_401")
     stats.failed("connection")
     stats.set_pending(3)
-    collector = PushCollector(stats)
-    registry = CollectorRegistry()
-    registry.register(FleetCollector(model, re.compile(".*"), ["dds"]))
-    registry.register(collector)
-    fast = FleetExposition(model, re.compile(".*"), ["dds"], [collector]).render()
-    assert fast == generate_latest(registry)
+    fast = assert_equal_in_both_formats(Rendering(model, extra_collectors=[PushCollector(stats)]))
     assert b'overseer_icinga2_pushes_total{result="http_401"} 1.0\n' in fast
     assert b"overseer_icinga2_pending_results 3.0\n" in fast

@@ -14,7 +14,6 @@ Run with `--hypothesis-show-statistics` to see how many examples each property t
 from __future__ import annotations
 
 import math
-import re
 import struct
 import subprocess
 from collections.abc import Callable
@@ -25,20 +24,17 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
-from prometheus_client import generate_latest
-from prometheus_client.openmetrics.exposition import generate_latest as generate_openmetrics
-from prometheus_client.openmetrics.parser import text_string_to_metric_families as parse_openmetrics
 from prometheus_client.parser import text_string_to_metric_families
-from prometheus_client.registry import CollectorRegistry
 
 from overseer.codec import DecodeError, cdr, ros1
 from overseer.config import ConfigError, config_from_dict, load_config
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.metrics import FleetCollector
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.serve.web_config import load_web_config, web_security_from_dict
 from overseer.sources.ros1_tcpros import TcprosError, decode_header
+from support.oracle import parse_openmetrics
+from support.rendering import Rendering
 
 Decoder = Callable[[bytes], DiagnosticArray]
 DECODERS: dict[str, tuple[Decoder, Callable[[DiagnosticArray], bytes]]] = {
@@ -237,13 +233,24 @@ def fed_model(fleet: list[tuple[str, DiagnosticArray]], limits: FleetLimits) -> 
     return model
 
 
-def render_both(model: FleetModel) -> tuple[bytes, bytes, bytes]:
-    """The fast exposition, prometheus-client's rendering of the collector, and its OpenMetrics."""
-    pattern = re.compile(".*")
-    registry = CollectorRegistry()
-    registry.register(FleetCollector(model, pattern, ["dds"]))
-    fast = FleetExposition(model, pattern, ["dds"]).render()
-    return fast, generate_latest(registry), generate_openmetrics(registry)  # type: ignore[no-untyped-call]
+def render_both(model: FleetModel) -> tuple[bytes, bytes, bytes, bytes]:
+    """Production's text and OpenMetrics, and the prometheus-client oracle's."""
+    rendering = Rendering(model)
+    return (
+        rendering.fast(TEXT),
+        rendering.oracle(TEXT),
+        rendering.fast(OPENMETRICS),
+        rendering.oracle(OPENMETRICS),
+    )
+
+
+def openmetrics_samples(exposition: bytes) -> list[tuple[str, tuple[tuple[str, str], ...], str]]:
+    """Every sample of an OpenMetrics exposition, read by prometheus-client's strict parser."""
+    return sorted(
+        (sample.name, tuple(sorted(sample.labels.items())), repr(sample.value + 0.0))
+        for family in parse_openmetrics(exposition.decode("utf-8"))
+        for sample in family.samples
+    )
 
 
 def samples(exposition: bytes) -> list[tuple[str, tuple[tuple[str, str], ...], str]]:
@@ -261,9 +268,10 @@ def test_any_fleet_renders_an_exposition_that_parses_back_to_the_model(
     fleet: list[tuple[str, DiagnosticArray]], capped: bool
 ) -> None:
     model = fed_model(fleet, SMALL_CAPS if capped else FleetLimits())
-    fast, collected, openmetrics = render_both(model)
+    fast, collected, openmetrics, collected_openmetrics = render_both(model)
     # The same samples as prometheus-client renders; bytes differ only in the sign of a zero (see below).
     assert samples(fast) == samples(collected)
+    assert openmetrics_samples(openmetrics) == openmetrics_samples(collected_openmetrics)
     snapshot = model.snapshot()
     expected_components = {
         (robot.name, component.name, component.hardware_id)
@@ -286,8 +294,7 @@ def test_any_fleet_renders_an_exposition_that_parses_back_to_the_model(
     assert seen_components == expected_components
     assert seen_robots == {robot.name for robot in snapshot.robots}
     assert len(snapshot.robots) <= model.limits.max_robots
-    parsed = parse_openmetrics(openmetrics.decode("utf-8"))  # type: ignore[no-untyped-call]
-    families = {family.name: family for family in parsed}
+    families = {family.name for family in parse_openmetrics(openmetrics.decode("utf-8"))}
     assert "overseer_messages" in families
 
 
@@ -311,7 +318,7 @@ def test_numeric_key_values_keep_nan_and_infinities_as_the_format_writes_them() 
     array = DiagnosticArray(
         0, 0, "", (DiagnosticStatus(0, "/c", "", "", (("a", "NaN"), ("b", "inf"), ("c", "-Infinity"))),)
     )
-    fast, _, _ = render_both(fed_model([("r", array)], FleetLimits()))
+    fast, *_ = render_both(fed_model([("r", array)], FleetLimits()))
     parsed = {
         sample.labels["key"]: sample.value
         for family in text_string_to_metric_families(fast.decode())
@@ -324,7 +331,7 @@ def test_numeric_key_values_keep_nan_and_infinities_as_the_format_writes_them() 
 @settings(max_examples=40, deadline=None)
 @given(fleet=fleets)
 def test_promtool_accepts_any_fleets_exposition(fleet: list[tuple[str, DiagnosticArray]]) -> None:
-    fast, _, _ = render_both(fed_model(fleet, FleetLimits()))
+    fast, *_ = render_both(fed_model(fleet, FleetLimits()))
     result = subprocess.run(["promtool", "check", "metrics"], input=fast, capture_output=True, timeout=60)
     assert result.returncode == 0, (result.stdout + result.stderr).decode()
 

@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from prometheus_client.registry import CollectorRegistry
 
 import overseer.serve.http
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition import FleetExposition
 from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import (
@@ -36,7 +36,6 @@ from overseer.serve.http import (
     REQUEST_TIMEOUT_SECONDS,
     OverseerServer,
 )
-from overseer.serve.metrics import FleetCollector
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.scrapes import Scrape, parse_scrape
@@ -215,12 +214,8 @@ def in_process_server(robots: int) -> Iterator[OverseerServer]:
     array = DiagnosticArray(0, 0, "", tuple(aggregated_statuses(leaves, initial_levels(leaves, 1, 1), set())))
     for index in range(robots):
         model.apply(f"robot{index}", array, "dds")
-    registry = CollectorRegistry()
-    pattern = re.compile(".*")
-    registry.register(FleetCollector(model, pattern, ["dds"]))
-    server = OverseerServer(
-        ("127.0.0.1", 0), ModelView(model, FleetExposition(model, pattern, ["dds"])), registry
-    )
+    view = ModelView(model, FleetExposition(model, re.compile(".*")), ExpositionAssembler(["dds"]))
+    server = OverseerServer(("127.0.0.1", 0), view)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:

@@ -17,7 +17,7 @@ import pytest
 
 from overseer.config import Config, DdsConfig, DomainConfig, EventsConfig, IngestConfig
 from overseer.model.shard import Shard
-from overseer.serve.exposition import ExpositionAssembler
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.workers import pool as pool_module
 from overseer.workers.pool import WorkerPool, WorkersUnavailable
 from overseer.workers.view import PooledSnapshots, PooledView

@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import pickle
 import re
-from collections.abc import Iterable
 from dataclasses import replace
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from prometheus_client.metrics_core import Metric
 from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.config import Config
@@ -23,21 +21,20 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.model.shard import Shard
 from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
-from overseer.serve.exposition import ExpositionAssembler, FleetExposition
-from overseer.serve.metrics import FleetCollector
+from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.exposition import ExpositionPart, FleetExposition
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
 from overseer.workers.merge import (
     CounterCarry,
     counters_part,
-    family_counters,
     merge_components_documents,
-    merge_families,
     merge_robots_documents,
     merge_snapshots,
     part_counters,
     portable_robots,
-    with_counters,
 )
 from overseer.workers.process import worker_config
+from support.oracle import parse_openmetrics
 from support.strategies import arrays
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,", ""]
@@ -109,29 +106,35 @@ def varied_fleet(workers: int, robots: int = 24) -> SplitFleet:
     return fleet
 
 
-def samples(text: bytes) -> dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]]:
-    """Each family's samples, sorted (values as text, so NaN equals NaN); fails on a family given twice."""
+def part(model: FleetModel) -> ExpositionPart:
+    """A model's rendered part, as a worker sends it over its pipe."""
+    rendered = FleetExposition(model, re.compile(".*")).render_part()
+    return pickle.loads(pickle.dumps(rendered))  # type: ignore[no-any-return]
+
+
+def exposition(
+    parts: list[ExpositionPart], fmt: ExpositionFormat = TEXT, transports: tuple[str, ...] = ("dds",)
+) -> bytes:
+    """The exposition the exporter writes from `parts`."""
+    return ExpositionAssembler(transports, external_url="http://x").assemble(parts, fmt)
+
+
+def samples(
+    text: bytes, fmt: ExpositionFormat = TEXT
+) -> dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]]:
+    """Each family's samples, sorted (values as text, so NaN equals NaN); fails on a family given twice.
+
+    OpenMetrics is read by prometheus-client's strict parser, which also fails on a malformed answer.
+    """
     families: dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]] = {}
-    for family in text_string_to_metric_families(text.decode()):
+    parse = parse_openmetrics if fmt.openmetrics else text_string_to_metric_families
+    for family in parse(text.decode()):
         assert family.name not in families, f"{family.name} appears twice"
         families[family.name] = sorted(
             (sample.name, tuple(sorted(sample.labels.items())), repr(sample.value))
             for sample in family.samples
         )
     return families
-
-
-def family_samples(
-    families: Iterable[Metric],
-) -> dict[str, list[tuple[str, tuple[tuple[str, str], ...], str]]]:
-    """Each family's samples, sorted, from collected families."""
-    return {
-        family.name: sorted(
-            (sample.name, tuple(sorted(sample.labels.items())), repr(sample.value))
-            for sample in family.samples
-        )
-        for family in families
-    }
 
 
 @pytest.mark.parametrize("workers", [1, 2, 3, 5])
@@ -152,35 +155,24 @@ def test_a_worker_outside_the_pool_is_refused() -> None:
         Shard().for_worker(2, 2)
 
 
+@pytest.mark.parametrize("fmt", [TEXT, OPENMETRICS], ids=["text", "openmetrics"])
 @pytest.mark.parametrize("workers", [2, 3])
-def test_joined_exposition_has_exactly_the_series_of_one_model(workers: int) -> None:
+def test_joined_exposition_has_exactly_the_series_of_one_model(workers: int, fmt: ExpositionFormat) -> None:
     fleet = varied_fleet(workers)
-    pattern = re.compile(".*")
-    whole = FleetExposition(fleet.whole, pattern, ["dds", "zenoh"]).render()
-    parts = [FleetExposition(model, pattern, ["dds", "zenoh"]).render_part() for model in fleet.parts]
-    assert sum(part.robots for part in parts) == len(fleet.whole.snapshot().robots)
-    assert all(part.robots for part in parts)  # every worker has robots: the join is really tested
-    joined = ExpositionAssembler(["dds", "zenoh"]).assemble(pickle.loads(pickle.dumps(parts)))
-    assert samples(joined) == samples(whole)
+    transports = ("dds", "zenoh")
+    whole = exposition([part(fleet.whole)], fmt, transports)
+    parts = [part(model) for model in fleet.parts]
+    assert sum(p.robots for p in parts) == len(fleet.whole.snapshot().robots)
+    assert all(p.robots for p in parts)  # every worker has robots: the join is really tested
+    joined = exposition(parts, fmt, transports)
+    assert samples(joined, fmt) == samples(whole, fmt)
     # Counters add up: invalid levels and component-limit drops were counted in every worker.
-    dropped = dict((labels, value) for _, labels, value in samples(joined)["overseer_statuses_dropped"])
+    dropped = dict((labels, value) for _, labels, value in samples(joined, fmt)["overseer_statuses_dropped"])
     assert dropped[(("reason", "invalid_level"),)] == repr(24.0)  # one per robot, whichever worker counted it
     assert len(joined.splitlines()) == len(whole.splitlines())
-
-
-def test_joined_openmetrics_families_equal_one_models() -> None:
-    fleet = varied_fleet(3)
-    pattern = re.compile(".*")
-    whole = list(FleetCollector(fleet.whole, pattern, ["dds"], external_url="http://x").collect())
-    answers = [
-        pickle.loads(
-            pickle.dumps(list(FleetCollector(model, pattern, ["dds"], external_url="http://x").collect()))
-        )
-        for model in fleet.parts
-    ]
-    merged = list(merge_families(answers))
-    assert [family.name for family in merged] == [family.name for family in whole]
-    assert family_samples(merged) == family_samples(whole)
+    # The headers and the end are the format's, written once whatever the number of workers.
+    assert joined.count(b"# TYPE ros_diagnostics_level gauge\n") == 1
+    assert joined.endswith(b"# EOF\n") is fmt.openmetrics
 
 
 @pytest.mark.parametrize(
@@ -259,10 +251,9 @@ def test_any_arrays_split_over_workers_serve_what_one_model_serves(
     for robot, array in received:
         fleet.apply(robot, array)
         fleet.clock.now += 1
-    pattern = re.compile(".*")
-    whole = FleetExposition(fleet.whole, pattern, ["dds"]).render()
-    parts = [FleetExposition(model, pattern, ["dds"]).render_part() for model in fleet.parts]
-    assert samples(ExpositionAssembler(["dds"]).assemble(parts)) == samples(whole)
+    parts = [part(model) for model in fleet.parts]
+    for fmt in (TEXT, OPENMETRICS):
+        assert samples(exposition(parts, fmt), fmt) == samples(exposition([part(fleet.whole)], fmt), fmt)
     query = ComponentQuery(limit=5)
     joined = merge_components_documents(
         [components_document(m.snapshot(), query) for m in fleet.parts], 5, 0.0
@@ -284,11 +275,10 @@ def test_carried_counters_never_go_back_when_a_worker_restarts_or_misses_a_scrap
 
 def test_joined_exposition_counters_survive_a_restarted_worker() -> None:
     fleet = varied_fleet(2)
-    pattern = re.compile(".*")
-    parts = [FleetExposition(model, pattern, ["dds"]).render_part() for model in fleet.parts]
+    parts = [part(model) for model in fleet.parts]
     carry = CounterCarry(2)
     before = counters_part(carry.totals((i, 0, part_counters(p)) for i, p in enumerate(parts)))
-    restarted = FleetExposition(FleetModel(LIMITS, fleet.clock), pattern, ["dds"]).render_part()  # counts 0
+    restarted = part(FleetModel(LIMITS, fleet.clock))  # counts 0
     after = counters_part(carry.totals([(0, 0, part_counters(parts[0])), (1, 1, part_counters(restarted))]))
     assert after.message_counts == before.message_counts
     assert after.dropped_statuses == before.dropped_statuses
@@ -299,18 +289,21 @@ def test_joined_exposition_counters_survive_a_restarted_worker() -> None:
 
 def test_openmetrics_counters_carried_replace_the_summed_ones() -> None:
     fleet = varied_fleet(2)
-    pattern = re.compile(".*")
-    answers = [list(FleetCollector(m, pattern, ["dds"]).collect()) for m in fleet.parts]
+    parts = [part(model) for model in fleet.parts]
     carry = CounterCarry(2)
-    totals = carry.totals((i, 0, family_counters(families)) for i, families in enumerate(answers))
-    merged = family_samples(with_counters(merge_families(answers), totals))
-    whole = family_samples(FleetCollector(fleet.whole, pattern, ["dds"]).collect())
-    assert merged == whole
-    empty = list(FleetCollector(FleetModel(LIMITS, fleet.clock), pattern, ["dds"]).collect())
-    restarted = [(0, 0, family_counters(answers[0])), (1, 1, family_counters(empty))]
-    assert (
-        family_samples(with_counters(merge_families([answers[0], empty]), carry.totals(restarted)))[
-            "overseer_messages"
-        ]
-        == whole["overseer_messages"]
+    totals = carry.totals((i, 0, part_counters(p)) for i, p in enumerate(parts))
+    without = [
+        replace(p, message_counts={}, dropped_statuses={}, truncated_strings=0, source_errors={})
+        for p in parts
+    ]
+    joined = samples(exposition([*without, counters_part(totals)], OPENMETRICS), OPENMETRICS)
+    whole = samples(exposition([part(fleet.whole)], OPENMETRICS), OPENMETRICS)
+    assert joined == whole
+    restarted = [
+        (0, 0, part_counters(parts[0])),
+        (1, 1, part_counters(part(FleetModel(LIMITS, fleet.clock)))),
+    ]
+    after = samples(
+        exposition([without[0], counters_part(carry.totals(restarted))], OPENMETRICS), OPENMETRICS
     )
+    assert after["overseer_messages"] == whole["overseer_messages"]

@@ -1,23 +1,24 @@
-"""The /metrics view: the metric contract, golden exposition, label escaping, promtool."""
+"""The /metrics view as production renders it: the metric contract, golden files, label escaping, promtool."""
 
 from __future__ import annotations
 
-import re
 import subprocess
 from pathlib import Path
 
 import pytest
-from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
-from prometheus_client.registry import CollectorRegistry
 
 from overseer.codec import compiled
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.serve.exposition_formats import OPENMETRICS
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
-from overseer.serve.metrics import FleetCollector, numeric_value
+from overseer.serve.metric_values import numeric_value
+from support.oracle import parse_openmetrics
+from support.rendering import Rendering
 
 GOLDEN = Path(__file__).parent / "golden" / "metrics.txt"
+GOLDEN_OPENMETRICS = Path(__file__).parent / "golden" / "metrics.openmetrics.txt"
 CONTRACT = {
     "ros_diagnostics_level": "gauge",
     "ros_diagnostics_robot_level": "gauge",
@@ -43,22 +44,26 @@ class Clock:
         return self.now
 
 
-def fleet_registry(
+def fleet_rendering(
     statuses: dict[str, list[DiagnosticStatus]],
     value_keys: str = ".*",
     messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
     external_url: str | None = None,
-) -> tuple[CollectorRegistry, FleetModel, Clock]:
+) -> tuple[Rendering, FleetModel, Clock]:
     clock = Clock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
     for robot, items in statuses.items():
         model.apply(robot, DiagnosticArray(0, 0, "", tuple(items)), "dds")
-    registry = CollectorRegistry()
-    collector = FleetCollector(
-        model, re.compile(value_keys), ["dds"], messages=messages, external_url=external_url
-    )
-    registry.register(collector)
-    return registry, model, clock
+    return Rendering(model, value_keys, messages=messages, external_url=external_url), model, clock
+
+
+def sample_value(rendering: Rendering, name: str, labels: dict[str, str]) -> float | None:
+    """The value of one sample of production's exposition, or None when it has none."""
+    for family in text_string_to_metric_families(rendering.fast().decode()):
+        for sample in family.samples:
+            if sample.name == name and sample.labels == labels:
+                return float(sample.value)
+    return None
 
 
 PAPER_FLEET = {
@@ -72,15 +77,16 @@ PAPER_FLEET = {
 }
 
 
-def test_exposition_matches_golden_file() -> None:
-    registry, model, clock = fleet_registry(PAPER_FLEET)
+@pytest.mark.parametrize("openmetrics", [False, True], ids=["text", "openmetrics"])
+def test_exposition_matches_golden_file(openmetrics: bool) -> None:
+    rendering, model, clock = fleet_rendering(PAPER_FLEET)
     clock.now += 6
     model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0],)), "dds")
     model.count_message("dds", "decode_error")
-    text = generate_latest(registry).decode()
+    text = (rendering.fast(OPENMETRICS) if openmetrics else rendering.fast()).decode()
     text = text.replace('version="' + _version() + '"', 'version="VERSION"')
     text = text.replace('codec="' + compiled.implementation() + '"', 'codec="CODEC"')
-    assert text == GOLDEN.read_text(encoding="utf-8")
+    assert text == (GOLDEN_OPENMETRICS if openmetrics else GOLDEN).read_text(encoding="utf-8")
 
 
 def _version() -> str:
@@ -90,36 +96,38 @@ def _version() -> str:
 
 
 def test_contract_names_and_types_are_exported() -> None:
-    registry, _, _ = fleet_registry(PAPER_FLEET)
-    families = {f.name: f.type for f in text_string_to_metric_families(generate_latest(registry).decode())}
+    rendering, _, _ = fleet_rendering(PAPER_FLEET)
+    families = {f.name: f.type for f in text_string_to_metric_families(rendering.fast().decode())}
+    openmetrics = {f.name: f.type for f in parse_openmetrics(rendering.fast(OPENMETRICS).decode())}
     for name, kind in CONTRACT.items():
         assert families.get(name) == kind, name
+        assert openmetrics.get(name) == kind, name
 
 
 def test_levels_up_and_robot_level_samples() -> None:
-    registry, _, _ = fleet_registry(PAPER_FLEET)
+    rendering, _, _ = fleet_rendering(PAPER_FLEET)
     battery = {"robot": "robot1", "component": "/Power/Robot Battery", "hardware_id": "power1"}
-    assert registry.get_sample_value("ros_diagnostics_level", battery) == 0
-    assert registry.get_sample_value("ros_diagnostics_robot_level", {"robot": "robot1"}) == 1
-    assert registry.get_sample_value("ros_diagnostics_robot_level", {"robot": "site_a/robot7"}) == 2
-    assert registry.get_sample_value("ros_diagnostics_robot_up", {"robot": "robot1"}) == 1
-    assert registry.get_sample_value("ros_diagnostics_value", {**battery, "key": "voltage"}) == 12.6
-    assert registry.get_sample_value("ros_diagnostics_value", {**battery, "key": "note"}) is None
+    assert sample_value(rendering, "ros_diagnostics_level", battery) == 0
+    assert sample_value(rendering, "ros_diagnostics_robot_level", {"robot": "robot1"}) == 1
+    assert sample_value(rendering, "ros_diagnostics_robot_level", {"robot": "site_a/robot7"}) == 2
+    assert sample_value(rendering, "ros_diagnostics_robot_up", {"robot": "robot1"}) == 1
+    assert sample_value(rendering, "ros_diagnostics_value", {**battery, "key": "voltage"}) == 12.6
+    assert sample_value(rendering, "ros_diagnostics_value", {**battery, "key": "note"}) is None
 
 
 def test_only_allowed_value_keys_are_exported() -> None:
-    registry, _, _ = fleet_registry(PAPER_FLEET, value_keys="temperature|fps")
-    text = generate_latest(registry).decode()
+    rendering, _, _ = fleet_rendering(PAPER_FLEET, value_keys="temperature|fps")
+    text = rendering.fast().decode()
     assert 'key="temperature"' in text and 'key="fps"' in text
     assert 'key="voltage"' not in text
 
 
 def test_forgotten_robot_disappears_from_exposition() -> None:
-    registry, model, clock = fleet_registry(PAPER_FLEET)
+    rendering, model, clock = fleet_rendering(PAPER_FLEET)
     clock.now += 61
     model.apply("robot1", DiagnosticArray(0, 0, "", tuple(PAPER_FLEET["robot1"])), "dds")
     model.expire()
-    text = generate_latest(registry).decode()
+    text = rendering.fast().decode()
     assert "site_a/robot7" not in text
     assert 'robot="robot1"' in text
 
@@ -155,7 +163,7 @@ HOSTILE = [
 ]
 
 
-def hostile_registry() -> CollectorRegistry:
+def hostile_rendering() -> Rendering:
     statuses = {
         f"robot{i}/{name}": [
             DiagnosticStatus(
@@ -164,19 +172,19 @@ def hostile_registry() -> CollectorRegistry:
         ]
         for i, name in enumerate(HOSTILE)
     }
-    registry, _, _ = fleet_registry(statuses)
-    return registry
+    rendering, _, _ = fleet_rendering(statuses)
+    return rendering
 
 
 def test_hostile_names_are_escaped_and_parse_back() -> None:
-    text = generate_latest(hostile_registry()).decode()
+    text = hostile_rendering().fast().decode()
     families = {f.name: f for f in text_string_to_metric_families(text)}
     components = {s.labels["component"] for s in families["ros_diagnostics_level"].samples}
     assert components == set(HOSTILE)
 
 
 def test_hostile_exposition_passes_promtool() -> None:
-    text = generate_latest(hostile_registry())
+    text = hostile_rendering().fast()
     result = subprocess.run(["promtool", "check", "metrics"], input=text, capture_output=True, timeout=60)
     assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
 
@@ -188,10 +196,10 @@ def test_golden_exposition_passes_promtool() -> None:
     assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
 
 
-def status_messages(registry: CollectorRegistry) -> dict[tuple[str, str], str]:
+def status_messages(rendering: Rendering) -> dict[tuple[str, str], str]:
     """(robot, component) → message label of every ros_diagnostics_status_message sample (value 1)."""
     found = {}
-    for family in text_string_to_metric_families(generate_latest(registry).decode()):
+    for family in text_string_to_metric_families(rendering.fast().decode()):
         for sample in family.samples:
             if sample.name == "ros_diagnostics_status_message":
                 assert sample.value == 1
@@ -200,26 +208,26 @@ def status_messages(registry: CollectorRegistry) -> dict[tuple[str, str], str]:
 
 
 def test_status_messages_are_labels_of_the_components_not_ok_by_default() -> None:
-    registry, _, _ = fleet_registry(PAPER_FLEET)
-    assert status_messages(registry) == {
+    rendering, _, _ = fleet_rendering(PAPER_FLEET)
+    assert status_messages(rendering) == {
         ("robot1", "/Temp/Sensor1"): "High temperature",
         ("site_a/robot7", "/Camera/Cam1"): "No frames received",
     }
 
 
 def test_status_message_series_follow_the_configured_mode() -> None:
-    every, _, _ = fleet_registry(PAPER_FLEET, messages=MessageLabels("all"))
+    every, _, _ = fleet_rendering(PAPER_FLEET, messages=MessageLabels("all"))
     assert status_messages(every)[("robot1", "/Power/Robot Battery")] == "Charge OK"
     assert len(status_messages(every)) == 3
-    none, _, _ = fleet_registry(PAPER_FLEET, messages=MessageLabels("none"))
+    none, _, _ = fleet_rendering(PAPER_FLEET, messages=MessageLabels("none"))
     assert status_messages(none) == {}
 
 
 def test_a_component_back_to_ok_loses_its_status_message_series() -> None:
-    registry, model, _ = fleet_registry(PAPER_FLEET)
+    rendering, model, _ = fleet_rendering(PAPER_FLEET)
     recovered = PAPER_FLEET["robot1"][1]._replace(level=0, message="Normal")
     model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0], recovered)), "dds")
-    assert ("robot1", "/Temp/Sensor1") not in status_messages(registry)
+    assert ("robot1", "/Temp/Sensor1") not in status_messages(rendering)
 
 
 @pytest.mark.parametrize(
@@ -252,9 +260,9 @@ def test_hostile_status_messages_are_escaped_cut_and_parse_back() -> None:
             DiagnosticStatus(2, f"/C{i}", message, "", ()) for i, message in enumerate(HOSTILE_MESSAGES)
         ]
     }
-    registry, _, _ = fleet_registry(statuses, messages=MessageLabels("problems", 100))
-    text = generate_latest(registry)
-    found = status_messages(registry)
+    rendering, _, _ = fleet_rendering(statuses, messages=MessageLabels("problems", 100))
+    text = rendering.fast()
+    found = status_messages(rendering)
     assert [found[("robot1", f"/C{i}")] for i in range(len(HOSTILE_MESSAGES))] == [
         message_label_value(message, 100) for message in HOSTILE_MESSAGES
     ]
@@ -265,8 +273,8 @@ def test_hostile_status_messages_are_escaped_cut_and_parse_back() -> None:
 
 
 def test_external_url_is_exported_for_alert_links_only_when_configured() -> None:
-    registry, _, _ = fleet_registry(PAPER_FLEET, external_url="https://ops.example/overseer")
-    info = registry.get_sample_value("overseer_web_info", {"external_url": "https://ops.example/overseer"})
+    rendering, _, _ = fleet_rendering(PAPER_FLEET, external_url="https://ops.example/overseer")
+    info = sample_value(rendering, "overseer_web_info", {"external_url": "https://ops.example/overseer"})
     assert info == 1
-    plain, _, _ = fleet_registry(PAPER_FLEET)
-    assert "overseer_web_info{" not in generate_latest(plain).decode()
+    plain, _, _ = fleet_rendering(PAPER_FLEET)
+    assert "overseer_web_info{" not in plain.fast().decode()

@@ -6,7 +6,7 @@ import logging
 import threading
 from dataclasses import dataclass, field
 
-from prometheus_client.registry import Collector, CollectorRegistry
+from prometheus_client.registry import Collector
 
 from overseer.codec import compiled
 from overseer.config import Config
@@ -15,14 +15,14 @@ from overseer.model import FleetModel
 from overseer.model.expiry import start_expiry
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import FleetSource, Icinga2Push
-from overseer.serve.exposition import ExpositionAssembler
-from overseer.serve.fleet_view import FleetView, ModelView, model_renderers
+from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.fleet_view import FleetView, ModelView, model_exposition
 from overseer.serve.http import OverseerServer
 from overseer.serve.web_config import load_web_config
 from overseer.sources import Source, build_sources, enabled_transports
 from overseer.workers.metrics import WorkerPoolCollector
 from overseer.workers.pool import WorkerPool, WorkerStartError
-from overseer.workers.view import PooledCollector, PooledSnapshots, PooledView
+from overseer.workers.view import PooledSnapshots, PooledView
 
 log = logging.getLogger(__name__)
 
@@ -65,22 +65,15 @@ class Exporter:
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(config.icinga2, fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
-        # The registry renders the fleet first, then the extras: as the fast exposition appends them.
-        registry = CollectorRegistry(auto_describe=True)
+        assembler = ExpositionAssembler(transports, extra_collectors, config.web.external_url)
         view: FleetView
         if self.model is not None:
-            collector, exposition = model_renderers(self.model, config, transports, extra_collectors)
-            registry.register(collector)
-            view = ModelView(self.model, exposition)
+            view = ModelView(self.model, model_exposition(self.model, config), assembler)
         else:
             assert self.pool is not None
-            registry.register(PooledCollector(self.pool))
-            external_url = config.web.external_url
-            view = PooledView(self.pool, ExpositionAssembler(transports, extra_collectors, external_url))
-        for extra in extra_collectors:
-            registry.register(extra)
+            view = PooledView(self.pool, assembler)
         security = load_web_config(config.web.config_file)
-        self.server = OverseerServer(config.web.host_and_port, view, registry, security)
+        self.server = OverseerServer(config.web.host_and_port, view, security)
         self.server.events = self.history.store if self.history is not None else None
 
     def start(self) -> None:

@@ -46,7 +46,9 @@ def _families() -> tuple[CounterMetricFamily, CounterMetricFamily, GaugeMetricFa
             labels=["reason"],
         ),
         GaugeMetricFamily(
-            "overseer_events_database_bytes", "Size of the event database on disk, write-ahead log included."
+            "overseer_events_database_bytes",
+            "Size of the event database on disk, write-ahead log included.",
+            unit="bytes",
         ),
         GaugeMetricFamily(
             "overseer_events_store_up", "1 while events are being written; 0 when the database can't be used."

@@ -63,6 +63,7 @@ class PushCollector(Collector):
             "overseer_icinga2_last_success_timestamp_seconds",
             "Unix time of the last check result Icinga 2 accepted (0: none yet)",
             value=last_success,
+            unit="seconds",
         )
         yield GaugeMetricFamily(
             "overseer_icinga2_pending_results",

@@ -1,8 +1,11 @@
-"""Prometheus text exposition (format 0.0.4) of the fleet, fast enough for 100,000 series per scrape.
+"""The fleet's series rendered as exposition lines, fast enough for 100,000 series per scrape.
 
-It renders exactly the bytes prometheus-client renders from `FleetCollector` (the tests hold the two
-equal), but keeps each robot's lines and rebuilds them only when the robot's state or the set of its
-stale components changed: between two scrapes most robots merely republished the same diagnostics.
+Each robot's lines are kept between scrapes and rebuilt only when the robot's state or the set of its
+stale components changed (most robots merely republished the same diagnostics); within a changed robot
+only the components whose record changed are rendered again. The lines are the same bytes in every
+format a scrape may ask for (`exposition_formats`), so one cached part serves the text format and
+OpenMetrics alike; `assembler` adds the headers. The tests hold the result byte-identical to
+prometheus-client's rendering of the same fleet.
 """
 
 from __future__ import annotations
@@ -11,30 +14,23 @@ import bisect
 import re
 import threading
 from array import array
-from collections import Counter
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import cast
 
-from prometheus_client.exposition import generate_latest
-from prometheus_client.registry import Collector, CollectorRegistry
 from prometheus_client.utils import floatToGoString
 
-from overseer import __version__
-from overseer.codec import compiled
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
-from overseer.serve.metrics import DROP_REASONS, NumericValues, _Families, message_counts
+from overseer.serve.metric_values import NumericValues
 
-CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
-
-# prometheus-client's number format (Go's), so values render exactly as the collector's do.
+# prometheus-client's number format (Go's), so values render exactly as its families' do.
 go_float = cast(Callable[[float], str], floatToGoString)
 
 
 def escape_label_value(value: str) -> str:
-    """A label value as the text format writes it between double quotes."""
+    """A label value as the exposition formats write it between double quotes."""
     return value.replace("\\", r"\\").replace("\n", r"\n").replace('"', r"\"")
 
 
@@ -62,37 +58,27 @@ class _RobotLines:
 
 
 class FleetExposition:
-    """Renders the fleet model as the metric contract in the Prometheus text format."""
+    """Renders a fleet model's series (a worker's robots, or the whole fleet) as one `ExpositionPart`."""
 
     def __init__(
         self,
         model: FleetModel,
         value_keys: re.Pattern[str],
-        transports: Iterable[str],
-        extra_collectors: Iterable[Collector] = (),
         *,
         messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
-        external_url: str | None = None,
     ) -> None:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
-        `messages` and `external_url` as for `FleetCollector`. `extra_collectors` (small ones: the event
-        history's, the Icinga 2 push's) are rendered by prometheus-client and appended after the fleet:
-        what a registry with the fleet's collector first, then them, renders.
+        `messages` chooses the components with a status-message series and the length of its label.
         """
-        self.assembler = ExpositionAssembler(transports, extra_collectors, external_url)
         self._model = model
         self._value_keys = value_keys
         self._messages = messages
         self._robots: dict[str, _RobotLines] = {}
         self._lock = threading.Lock()
 
-    def render(self) -> bytes:
-        """The exposition of the fleet now."""
-        return self.assembler.assemble([self.render_part()])
-
     def render_part(self) -> ExpositionPart:
-        """The model's series and counters, for an assembler to join with other models' (workers')."""
+        """The model's series and counters now, for an assembler to write out (with other workers')."""
         with self._lock:
             return self._render(self._model.snapshot())
 
@@ -138,97 +124,16 @@ class FleetExposition:
         )
 
 
-# The per-robot and per-component families, in exposition order: an `ExpositionPart` holds their lines.
-FLEET_FAMILIES = (
-    "ros_diagnostics_level",
-    "ros_diagnostics_robot_level",
-    "ros_diagnostics_robot_up",
-    "ros_diagnostics_robot_last_message_timestamp_seconds",
-    "ros_diagnostics_level_changes",
-    "ros_diagnostics_value",
-    "ros_diagnostics_status_message",
-)
-
-
 @dataclass(frozen=True, slots=True)
 class ExpositionPart:
     """The rendered series of one model (a worker's robots): lines per fleet family, and its counters."""
 
     robots: int
-    families: tuple[bytes, ...]  # the lines of each of FLEET_FAMILIES, without the header
+    families: tuple[bytes, ...]  # the lines of each of metric_families.FLEET_FAMILIES, no header
     message_counts: dict[tuple[str, str], int]
     dropped_statuses: dict[str, int]
     truncated_strings: int
     source_errors: dict[tuple[str, str], int]
-
-
-class ExpositionAssembler:
-    """Joins parts (one per worker, robots disjoint) into one exposition; counters are summed."""
-
-    def __init__(
-        self,
-        transports: Iterable[str],
-        extra_collectors: Iterable[Collector] = (),
-        external_url: str | None = None,
-    ) -> None:
-        """Add zero message counts for `transports`, then append `extra_collectors` and the web info."""
-        self._extra = CollectorRegistry(auto_describe=False)
-        for collector in extra_collectors:
-            self._extra.register(collector)
-        self._transports = tuple(transports)
-        self._web_info = (
-            ""
-            if external_url is None
-            else f'overseer_web_info{{external_url="{escape_label_value(external_url)}"}} 1.0\n'
-        )
-        self._headers = {
-            metric.name: _header(metric.name, metric.type, metric.documentation)
-            for metric in _Families.create().all()
-        }
-
-    def assemble(self, parts: Sequence[ExpositionPart]) -> bytes:
-        """The whole exposition: each family's header, then every part's lines of it; then the counters."""
-        headers = self._headers
-        message_totals: Counter[tuple[str, str]] = Counter()
-        dropped: Counter[str] = Counter()
-        errors: Counter[tuple[str, str]] = Counter()
-        for part in parts:
-            message_totals.update(part.message_counts)
-            dropped.update(part.dropped_statuses)
-            errors.update(part.source_errors)
-        truncated = sum(part.truncated_strings for part in parts)
-        tail = [headers["overseer_messages"]]
-        for (transport, result), count in message_counts(message_totals, self._transports):
-            tail.append(
-                f'overseer_messages_total{{result="{escape_label_value(result)}",'
-                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
-            )
-        tail.append(headers["overseer_statuses_dropped"])
-        for reason in DROP_REASONS:
-            dropped_count = go_float(float(dropped[reason]))
-            tail.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {dropped_count}\n')
-        tail.append(headers["overseer_strings_truncated"])
-        tail.append(f"overseer_strings_truncated_total {go_float(float(truncated))}\n")
-        tail.append(headers["overseer_source_errors"])
-        for (transport, reason), count in sorted(errors.items()):
-            tail.append(
-                f'overseer_source_errors_total{{reason="{escape_label_value(reason)}",'
-                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
-            )
-        tail.append(headers["overseer_build_info"])
-        tail.append(
-            f'overseer_build_info{{codec="{compiled.implementation()}",'
-            f'version="{escape_label_value(__version__)}"}} 1.0\n'
-        )
-        tail.append(headers["overseer_web_info"])
-        tail.append(self._web_info)
-        body: list[bytes] = []
-        for index, family in enumerate(FLEET_FAMILIES):
-            body.append(headers[family].encode())
-            body.extend(part.families[index] for part in parts)
-        body.append("".join(tail).encode())
-        body.append(generate_latest(self._extra))  # joined here, not appended: no copy of the whole body
-        return b"".join(body)
 
 
 def _lines_for(
@@ -401,9 +306,3 @@ class _RenderCache:
         if formatted is None:
             formatted = self._formatted[value] = go_float(value)
         return formatted
-
-
-def _header(name: str, kind: str, documentation: str) -> str:
-    exposed = name + "_total" if kind == "counter" else name
-    help_text = documentation.replace("\\", r"\\").replace("\n", r"\n")
-    return f"# HELP {exposed} {help_text}\n# TYPE {exposed} {kind}\n"

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any, Protocol
-
-from prometheus_client.registry import Collector
 
 from overseer.config import Config
 from overseer.model import FleetModel
 from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition import FleetExposition
+from overseer.serve.exposition_formats import ExpositionFormat
 from overseer.serve.message_labels import MessageLabels
-from overseer.serve.metrics import FleetCollector
 
 
 class FleetPartUnavailable(RuntimeError):
@@ -22,8 +20,8 @@ class FleetPartUnavailable(RuntimeError):
 class FleetView(Protocol):
     """The whole fleet as the endpoint serves it, however many processes hold it."""
 
-    def metrics_text(self) -> bytes:
-        """The Prometheus text exposition of the whole fleet."""
+    def metrics(self, fmt: ExpositionFormat) -> bytes:
+        """The exposition of the whole fleet in `fmt`."""
         ...
 
     def robots_document(self) -> dict[str, Any]:
@@ -42,14 +40,17 @@ class FleetView(Protocol):
 class ModelView:
     """The fleet held by one model in this process (one ingest worker, the exporter itself)."""
 
-    def __init__(self, model: FleetModel, exposition: FleetExposition) -> None:
-        """Serve `model`, rendering its metrics with `exposition`."""
+    def __init__(
+        self, model: FleetModel, exposition: FleetExposition, assembler: ExpositionAssembler
+    ) -> None:
+        """Serve `model`, rendering its series with `exposition` and writing them out with `assembler`."""
         self.model = model
         self.exposition = exposition
+        self.assembler = assembler
 
-    def metrics_text(self) -> bytes:
-        """The exposition of the model."""
-        return self.exposition.render()
+    def metrics(self, fmt: ExpositionFormat) -> bytes:
+        """The exposition of the model in `fmt`."""
+        return self.assembler.assemble([self.exposition.render_part()], fmt)
 
     def robots_document(self) -> dict[str, Any]:
         """Every robot's summary."""
@@ -66,16 +67,8 @@ class ModelView:
         return components_document(self.model.snapshot(), query)
 
 
-def model_renderers(
-    model: FleetModel, config: Config, transports: Iterable[str], extra_collectors: Iterable[Collector] = ()
-) -> tuple[FleetCollector, FleetExposition]:
-    """The two renderings of `model` the metrics config asks for: prometheus-client's, and the fast one."""
-    metrics, external_url = config.metrics, config.web.external_url
+def model_exposition(model: FleetModel, config: Config) -> FleetExposition:
+    """The renderer of `model`'s series the metrics configuration asks for."""
+    metrics = config.metrics
     messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
-    transports = tuple(transports)
-    pattern = metrics.value_key_pattern
-    collector = FleetCollector(model, pattern, transports, messages=messages, external_url=external_url)
-    exposition = FleetExposition(
-        model, pattern, transports, extra_collectors, messages=messages, external_url=external_url
-    )
-    return collector, exposition
+    return FleetExposition(model, metrics.value_key_pattern, messages=messages)

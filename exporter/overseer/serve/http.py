@@ -24,14 +24,11 @@ from importlib import resources
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from prometheus_client.exposition import choose_encoder
-from prometheus_client.registry import CollectorRegistry
-
 from overseer.history.query import QueryError, parse_event_query
 from overseer.history.store import EventStore, EventsUnavailable
 from overseer.serve.api import ComponentQueryError, parse_component_query
-from overseer.serve.exposition import CONTENT_TYPE as EXPOSITION_CONTENT_TYPE
 from overseer.serve.fleet_view import FleetPartUnavailable, FleetView
+from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
@@ -54,7 +51,7 @@ _NOT_TLS_ANSWER = (
 
 
 class OverseerServer(ThreadingHTTPServer):
-    """A threading HTTP server that serves one fleet view and one registry."""
+    """A threading HTTP server that serves one fleet view."""
 
     daemon_threads = True
     events: EventStore | None = None  # the event history, when enabled
@@ -65,17 +62,12 @@ class OverseerServer(ThreadingHTTPServer):
         self,
         address: tuple[str, int],
         view: FleetView,
-        registry: CollectorRegistry,
         security: WebSecurity | None = None,
     ) -> None:
-        """Bind to `address` ('' host for every interface; IPv6 when the host has a colon).
-
-        `/metrics` in the text format and the API read `view`; OpenMetrics is rendered from `registry`.
-        """
+        """Serve `view` on `address` ('' host for every interface; IPv6 when the host has a colon)."""
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
         self.view = view
-        self.registry = registry
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -306,13 +298,8 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(200, {"events": events, "next": cursor}, head_only)
 
     def _metrics(self, head_only: bool) -> None:
-        accept = self.headers.get("Accept", "")
-        if "application/openmetrics-text" in accept:
-            encoder, content_type = choose_encoder(accept)
-            body = encoder(self.server.registry)
-        else:
-            body, content_type = self.server.view.metrics_text(), EXPOSITION_CONTENT_TYPE
-        self._send(200, body, content_type, head_only, compressible=True)
+        fmt = negotiate_format(self.headers.get("Accept"))
+        self._send(200, self.server.view.metrics(fmt), fmt.content_type, head_only, compressible=True)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:
         body = json.dumps(document, ensure_ascii=False, allow_nan=False).encode("utf-8")
@@ -328,7 +315,7 @@ class _Handler(BaseHTTPRequestHandler):
         extra: tuple[tuple[str, str], ...] = (),
     ) -> None:
         self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
-        if compressible and "gzip" in self.headers.get("Accept-Encoding", ""):
+        if compressible and accepts_gzip(self.headers.get("Accept-Encoding")):
             body = gzip.compress(body, compresslevel=1)
             encoding: str | None = "gzip"
         else:

@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import heapq
 import threading
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
-from prometheus_client.metrics_core import Metric
-from prometheus_client.samples import Sample
-
 from overseer.levels import Level, severity_rank
 from overseer.model import FleetLimits, FleetSnapshot, RobotState
-from overseer.serve.exposition import FLEET_FAMILIES, ExpositionPart
+from overseer.serve.exposition import ExpositionPart
+from overseer.serve.metric_families import FLEET_FAMILIES
 
 
 def merge_robots_documents(documents: Sequence[dict[str, Any]], generated_at: float) -> dict[str, Any]:
@@ -49,35 +47,6 @@ def merge_components_documents(
 def _component_order(component: dict[str, Any]) -> tuple[int, str, str, str]:
     level = Level(component["level"])
     return (-severity_rank(level), component["robot"], component["name"], component["hardware_id"])
-
-
-def merge_families(answers: Iterable[Sequence[Metric]]) -> Iterator[Metric]:
-    """The workers' metric families as one set: samples joined per family, counters with equal labels added.
-
-    Per-robot series are each in one worker's answer only; the exporter-wide ones (counters, build info)
-    are in every answer: counters are summed, the rest taken once.
-    """
-    merged: dict[str, Metric] = {}
-    index: dict[str, dict[tuple[str, tuple[tuple[str, str], ...]], int]] = {}
-    for families in answers:
-        for family in families:
-            target = merged.get(family.name)
-            if target is None:
-                target = merged[family.name] = Metric(family.name, family.documentation, family.type)
-                index[family.name] = {}
-            seen = index[family.name]
-            for sample in family.samples:
-                identity = (sample.name, tuple(sorted(sample.labels.items())))
-                position = seen.get(identity)
-                if position is None:
-                    seen[identity] = len(target.samples)
-                    target.samples.append(sample)
-                elif family.type == "counter":
-                    held = target.samples[position]
-                    target.samples[position] = Sample(
-                        held.name, held.labels, held.value + sample.value, held.timestamp, held.exemplar
-                    )
-    yield from merged.values()
 
 
 def portable_robots(snapshot: FleetSnapshot) -> list[RobotState]:
@@ -184,33 +153,3 @@ def counters_part(counts: Mapping[CounterKey, float]) -> ExpositionPart:
         else:
             truncated = int(value)
     return ExpositionPart(0, (b"",) * len(FLEET_FAMILIES), messages, dropped, truncated, errors)
-
-
-EXPORTER_COUNTERS = (
-    "overseer_messages",
-    "overseer_statuses_dropped",
-    "overseer_strings_truncated",
-    "overseer_source_errors",
-)
-
-
-def family_counters(families: Iterable[Metric]) -> dict[CounterKey, float]:
-    """The exporter-wide counters among collected families, keyed by family, sample name and labels."""
-    return {
-        (family.name, sample.name, tuple(sorted(sample.labels.items()))): sample.value
-        for family in families
-        if family.name in EXPORTER_COUNTERS
-        for sample in family.samples
-    }
-
-
-def with_counters(families: Iterable[Metric], counts: Mapping[CounterKey, float]) -> Iterator[Metric]:
-    """`families` with the exporter-wide counters' samples replaced by `counts` (keyed as family_counters)."""
-    for family in families:
-        if family.name in EXPORTER_COUNTERS:
-            family.samples = [
-                Sample(name, dict(labels), value)
-                for (owner, name, labels), value in sorted(counts.items())
-                if owner == family.name
-            ]
-        yield family

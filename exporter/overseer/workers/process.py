@@ -22,9 +22,8 @@ from overseer.model import FleetModel
 from overseer.model.expiry import start_expiry
 from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
 from overseer.serve.exposition import FleetExposition
-from overseer.serve.fleet_view import model_renderers
-from overseer.serve.metrics import FleetCollector
-from overseer.sources import Source, build_sources, enabled_transports
+from overseer.serve.fleet_view import model_exposition
+from overseer.sources import Source, build_sources
 from overseer.workers.merge import portable_robots
 
 log = logging.getLogger(__name__)
@@ -51,15 +50,12 @@ class _Worker:
     model: FleetModel
     sources: list[Source]
     exposition: FleetExposition
-    collector: FleetCollector
     watch: TransitionWatch | None
 
     def answer(self, kind: str, argument: Any) -> Any:
         """The answer to one request from the exporter."""
         if kind == "part":
             return self.exposition.render_part()
-        if kind == "families":
-            return list(self.collector.collect())
         snapshot = self.model.snapshot()
         if kind == "robots":
             return robots_document(snapshot)
@@ -111,13 +107,13 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
 def _start(config: Config, events: Connection) -> _Worker:
     model = FleetModel(config.fleet)
     sources = build_sources(config, model)
-    collector, exposition = model_renderers(model, config, enabled_transports(config))
+    exposition = model_exposition(model, config)
     watch = TransitionWatch(model, _EventSender(events).send) if config.events.enabled else None
     if watch is not None:
         watch.start()  # before the transports, so that it sees their first messages
     for source in sources:
         source.start()
-    return _Worker(model, sources, exposition, collector, watch)
+    return _Worker(model, sources, exposition, watch)
 
 
 class _EventSender:

@@ -3,26 +3,21 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
-from prometheus_client.metrics_core import Metric
-from prometheus_client.registry import Collector
-
 from overseer.model import FleetSnapshot
 from overseer.serve.api import ComponentQuery
-from overseer.serve.exposition import ExpositionAssembler, ExpositionPart
+from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.exposition import ExpositionPart
+from overseer.serve.exposition_formats import ExpositionFormat
 from overseer.workers.merge import (
     CounterCarry,
     counters_part,
-    family_counters,
     merge_components_documents,
-    merge_families,
     merge_robots_documents,
     merge_snapshots,
     part_counters,
-    with_counters,
 )
 from overseer.workers.pool import WorkerPool, WorkersUnavailable
 
@@ -39,12 +34,12 @@ class PooledView:
         self._owners = [pool.config.shard.for_worker(index, pool.count) for index in range(pool.count)]
         self._counters = CounterCarry(pool.count)
 
-    def metrics_text(self) -> bytes:
+    def metrics(self, fmt: ExpositionFormat) -> bytes:
         """Every worker's series under one header per family, counters added up and never going back."""
         answers = self.pool.ask_all("part")
         totals = self._counters.totals((a.worker, a.generation, part_counters(a.value)) for a in answers)
         parts = [_without_counters(answer.value) for answer in answers]
-        return self._assembler.assemble([*parts, counters_part(totals)])
+        return self._assembler.assemble([*parts, counters_part(totals)], fmt)
 
     def robots_document(self) -> dict[str, Any]:
         """Every worker's robots, by name."""
@@ -87,21 +82,6 @@ class PooledSnapshots:
         answers = self._pool.ask_every("snapshot")
         self._last = merge_snapshots([a.value for a in answers], self._pool.config.fleet, time.time())
         return self._last
-
-
-class PooledCollector(Collector):
-    """The fleet's metric families for OpenMetrics scrapes, joined from every worker's."""
-
-    def __init__(self, pool: WorkerPool) -> None:
-        """Collect from `pool`'s workers."""
-        self._pool = pool
-        self._counters = CounterCarry(pool.count)
-
-    def collect(self) -> Iterator[Metric]:
-        """Every worker's families, merged, the exporter-wide counters never going back."""
-        answers = self._pool.ask_all("families")
-        totals = self._counters.totals((a.worker, a.generation, family_counters(a.value)) for a in answers)
-        yield from with_counters(merge_families(a.value for a in answers), totals)
 
 
 def _without_counters(part: ExpositionPart) -> ExpositionPart:

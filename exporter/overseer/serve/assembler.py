@@ -1,0 +1,86 @@
+"""One exposition from rendered parts (one per ingest worker): headers once, lines of every part, counters.
+
+The same parts make any format the scrape asked for: the formats differ only in their headers and end.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Sequence
+
+from prometheus_client.registry import Collector, CollectorRegistry
+
+from overseer import __version__
+from overseer.codec import compiled
+from overseer.serve import metric_families as contract
+from overseer.serve.exposition import ExpositionPart, escape_label_value, go_float
+from overseer.serve.exposition_formats import TEXT, ExpositionFormat
+from overseer.serve.metric_values import DROP_REASONS, message_counts
+
+
+class ExpositionAssembler:
+    """Joins parts (robots disjoint) into one exposition; counters are summed, extra collectors appended."""
+
+    def __init__(
+        self,
+        transports: Iterable[str],
+        extra_collectors: Iterable[Collector] = (),
+        external_url: str | None = None,
+    ) -> None:
+        """Add zero message counts for `transports`, then append `extra_collectors` and the web info."""
+        self._extra = CollectorRegistry(auto_describe=False)
+        for collector in extra_collectors:
+            self._extra.register(collector)
+        self._transports = tuple(transports)
+        self._web_info = (
+            ""
+            if external_url is None
+            else f'overseer_web_info{{external_url="{escape_label_value(external_url)}"}} 1.0\n'
+        )
+
+    def assemble(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> bytes:
+        """The exposition in `fmt`: each family's header, then every part's lines of it; then the rest."""
+        body: list[bytes] = []
+        for index, family in enumerate(contract.FLEET_FAMILIES):
+            body.append(fmt.header(family).encode())
+            body.extend(part.families[index] for part in parts)
+        body.append(self._exporter_families(parts, fmt).encode())
+        body.append(fmt.extras(self._extra))
+        body.append(fmt.end)
+        return b"".join(body)  # joined once: no copy of the whole body on the way
+
+    def _exporter_families(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> str:
+        message_totals: Counter[tuple[str, str]] = Counter()
+        dropped: Counter[str] = Counter()
+        errors: Counter[tuple[str, str]] = Counter()
+        for part in parts:
+            message_totals.update(part.message_counts)
+            dropped.update(part.dropped_statuses)
+            errors.update(part.source_errors)
+        truncated = sum(part.truncated_strings for part in parts)
+        lines = [fmt.header(contract.MESSAGES)]
+        for (transport, result), count in message_counts(message_totals, self._transports):
+            lines.append(
+                f'overseer_messages_total{{result="{escape_label_value(result)}",'
+                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
+            )
+        lines.append(fmt.header(contract.STATUSES_DROPPED))
+        for reason in DROP_REASONS:
+            dropped_count = go_float(float(dropped[reason]))
+            lines.append(f'overseer_statuses_dropped_total{{reason="{reason}"}} {dropped_count}\n')
+        lines.append(fmt.header(contract.STRINGS_TRUNCATED))
+        lines.append(f"overseer_strings_truncated_total {go_float(float(truncated))}\n")
+        lines.append(fmt.header(contract.SOURCE_ERRORS))
+        for (transport, reason), count in sorted(errors.items()):
+            lines.append(
+                f'overseer_source_errors_total{{reason="{escape_label_value(reason)}",'
+                f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
+            )
+        lines.append(fmt.header(contract.BUILD_INFO))
+        lines.append(
+            f'overseer_build_info{{codec="{compiled.implementation()}",'
+            f'version="{escape_label_value(__version__)}"}} 1.0\n'
+        )
+        lines.append(fmt.header(contract.WEB_INFO))
+        lines.append(self._web_info)
+        return "".join(lines)

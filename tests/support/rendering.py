@@ -1,0 +1,56 @@
+"""A fleet model rendered two ways: by production and by the prometheus-client oracle."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+from prometheus_client.registry import Collector
+
+from overseer.model import FleetModel
+from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.exposition import FleetExposition
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
+from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
+from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
+
+FORMATS = (TEXT, OPENMETRICS)
+
+
+class Rendering:
+    """`model` rendered by the cached renderer and assembler, and by the oracle, in either format."""
+
+    def __init__(
+        self,
+        model: FleetModel,
+        value_keys: str = ".*",
+        transports: Iterable[str] = ("dds",),
+        extra_collectors: Iterable[Collector] = (),
+        *,
+        messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+        external_url: str | None = None,
+    ) -> None:
+        """Render `model` exporting the key-values `value_keys` matches, with these collectors appended."""
+        pattern = re.compile(value_keys)
+        transports, extra = tuple(transports), tuple(extra_collectors)
+        self.exposition = FleetExposition(model, pattern, messages=messages)
+        self.assembler = ExpositionAssembler(transports, extra, external_url)
+        oracle = OracleCollector(model, pattern, transports, messages=messages, external_url=external_url)
+        self.registry = oracle_registry(oracle, *extra)
+
+    def fast(self, fmt: ExpositionFormat = TEXT) -> bytes:
+        """Production's exposition now."""
+        return self.assembler.assemble([self.exposition.render_part()], fmt)
+
+    def oracle(self, fmt: ExpositionFormat = TEXT) -> bytes:
+        """prometheus-client's exposition now."""
+        return oracle_openmetrics(self.registry) if fmt.openmetrics else oracle_text(self.registry)
+
+    def both(self, fmt: ExpositionFormat = TEXT) -> tuple[bytes, bytes]:
+        """Production's and the oracle's exposition now, production first."""
+        return self.fast(fmt), self.oracle(fmt)
+
+
+def render(model: FleetModel, value_keys: str = ".*", fmt: ExpositionFormat = TEXT) -> str:
+    """Production's exposition of `model`, as text."""
+    return Rendering(model, value_keys).fast(fmt).decode("utf-8")
