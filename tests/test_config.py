@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from overseer.config import ConfigError, DomainConfig, load_config, parse_duration
+from overseer.config import ConfigError, load_config
+from overseer.config.dds import DomainConfig
+from overseer.config.parsers import parse_duration
 from support.processes import overseer_command
 
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from overseer.cli import _exporter_overrides, _parser
-from overseer.config import Config, ConfigError, Ros1Robot, load_config
+from overseer.config import Config, ConfigError, load_config
+from overseer.config.ros1 import Ros1Robot
 from overseer.ros_master import master_host
 from support.processes import overseer_command
 

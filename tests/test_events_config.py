@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from overseer.config import ConfigError, EventsConfig, load_config
+from overseer.config import ConfigError, load_config
+from overseer.config.events import EventsConfig
 from overseer.log_format import JsonFormatter
 from support.processes import overseer_command
 

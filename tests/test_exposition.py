@@ -6,11 +6,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from overseer.config.metrics import MESSAGE_LABEL_MODES
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve import exposition as exposition_module
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
-from overseer.serve.message_labels import MESSAGE_LABEL_MODES, MessageLabels
+from overseer.serve.message_labels import MessageLabels
 from support.rendering import FORMATS, Rendering
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from overseer.config import ConfigError
-from overseer.push.icinga2_config import icinga2_config
+from overseer.config.icinga2 import icinga2_config
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_push import HOST_SILENT_TEXT
 from overseer.push.icinga2_results import split_perfdata

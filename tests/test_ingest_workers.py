@@ -15,7 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from overseer.config import Config, DdsConfig, DomainConfig, EventsConfig, IngestConfig
+from overseer.config import Config
+from overseer.config.dds import DdsConfig, DomainConfig
+from overseer.config.events import EventsConfig
+from overseer.config.ingest import IngestConfig
 from overseer.model.shard import Shard
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.workers import pool as pool_module

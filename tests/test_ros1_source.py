@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from overseer.codec.ros1 import encode_diagnostic_array
-from overseer.config import Ros1Config, Ros1Robot
+from overseer.config.ros1 import Ros1Config, Ros1Robot
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.api import robot_document

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from overseer.config import ConfigError, parse_shard
+from overseer.config import ConfigError
+from overseer.config.fleet import parse_shard
 from overseer.model.shard import Shard
 from support.processes import running_exporter, running_simulator, wait_for
 

@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from overseer.config import ConfigError, ZenohConfig, load_config
+from overseer.config import ConfigError, load_config
+from overseer.config.zenoh import ZenohConfig
 from overseer.sources.zenoh_keys import (
     BRIDGE,
     DIAGNOSTIC_ARRAY_HASH,

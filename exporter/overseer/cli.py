@@ -13,14 +13,11 @@ from collections.abc import Sequence
 from typing import Any
 
 from overseer import __version__
-from overseer.config import (
-    DEFAULT_PORT,
-    ConfigError,
-    load_config,
-    parse_dds_peer,
-    parse_duration,
-    parse_size,
-)
+from overseer.config import ConfigError, load_config
+from overseer.config.dds import parse_dds_peer
+from overseer.config.events import parse_max_size
+from overseer.config.parsers import parse_duration
+from overseer.config.web import DEFAULT_PORT
 from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
@@ -352,7 +349,7 @@ def _event_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.events_retention is not None:
         overrides["events.retention"] = parse_duration(args.events_retention, "--events.retention")
     if args.events_max_size is not None:
-        overrides["events.max_size"] = parse_size(args.events_max_size, "--events.max-size")
+        overrides["events.max_size"] = parse_max_size(args.events_max_size, "--events.max-size")
     return overrides
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import threading
 
-from overseer.config import EventsConfig
+from overseer.config.events import EventsConfig
 from overseer.history.detector import EventSink, TransitionDetector
 from overseer.history.metrics import EventsCollector
 from overseer.history.store import EventStore, StoreSettings

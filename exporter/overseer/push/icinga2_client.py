@@ -14,7 +14,7 @@ import ssl
 from typing import Any
 from urllib.parse import quote
 
-from overseer.push.icinga2_config import Icinga2Config
+from overseer.config.icinga2 import Icinga2Config
 
 
 class Icinga2Error(Exception):

@@ -16,9 +16,9 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from overseer.config.icinga2 import Icinga2Config
 from overseer.model import FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
-from overseer.push.icinga2_config import Icinga2Config
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature

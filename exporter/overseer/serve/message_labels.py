@@ -11,11 +11,10 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from overseer.config.metrics import DEFAULT_MESSAGE_LABEL_LENGTH, MESSAGE_LABEL_MODES
 from overseer.levels import Level
 from overseer.model import Component
 
-MESSAGE_LABEL_MODES = ("none", "problems", "all")
-DEFAULT_MESSAGE_LABEL_LENGTH = 100
 ELLIPSIS = "\u2026"
 
 # Lone surrogates cannot be encoded as UTF-8 (a scrape would fail); they become U+FFFD, as the

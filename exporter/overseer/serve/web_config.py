@@ -24,7 +24,8 @@ from typing import Any
 import bcrypt
 import yaml
 
-from overseer.config import ConfigError, read_text_file
+from overseer.config import ConfigError
+from overseer.config.parsers import read_text_file
 
 REALM = "overseer"
 

@@ -21,7 +21,7 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.topic import Topic
 
 from overseer.codec.cdr import encode_diagnostic_array
-from overseer.config import DEFAULT_MAX_PARTICIPANT_INDEX, DdsPeer
+from overseer.config.dds import DEFAULT_MAX_PARTICIPANT_INDEX, DdsPeer
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.simulator.design import LeafComponent, aggregated_statuses, initial_levels, leaf_components

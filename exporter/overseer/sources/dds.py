@@ -23,7 +23,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from overseer.codec import DecodeError, cdr
-from overseer.config import DdsConfig, DdsPeer, DomainConfig
+from overseer.config.dds import DdsConfig, DdsPeer, DomainConfig
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.cyclone_config import (

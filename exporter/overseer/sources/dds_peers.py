@@ -10,7 +10,7 @@ from __future__ import annotations
 import socket
 from collections.abc import Callable, Sequence
 
-from overseer.config import DdsPeer
+from overseer.config.dds import DdsPeer
 
 
 def resolve_peer(peer: DdsPeer) -> list[str]:

@@ -19,7 +19,7 @@ from typing import Any
 
 from overseer.codec import DecodeError
 from overseer.codec.ros1 import MESSAGE_TYPE, WIRE_FORMAT
-from overseer.config import Ros1Config, Ros1Robot
+from overseer.config.ros1 import Ros1Config, Ros1Robot
 from overseer.model import FleetModel
 from overseer.sources.ingest import PayloadIngest
 from overseer.sources.ros1_slave import SlaveApi

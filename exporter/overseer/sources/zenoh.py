@@ -18,7 +18,7 @@ import zenoh
 from zenoh.handlers import FifoChannel
 
 from overseer.codec import DecodeError, cdr
-from overseer.config import ZenohConfig
+from overseer.config.zenoh import ZenohConfig
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.ingest import PayloadIngest

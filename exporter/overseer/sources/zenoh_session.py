@@ -6,7 +6,8 @@ import json
 
 import zenoh
 
-from overseer.config import ConfigError, ZenohConfig
+from overseer.config import ConfigError
+from overseer.config.zenoh import ZenohConfig
 
 # How long one attempt to reach a router may take in client mode before it is counted and retried.
 CLIENT_CONNECT_TIMEOUT_MS = 5000

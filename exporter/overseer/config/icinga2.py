@@ -11,10 +11,11 @@ import ssl
 from dataclasses import dataclass
 from typing import Any
 
-from overseer.config import ConfigError, parse_duration, read_text_file
+from overseer.config.errors import ConfigError
+from overseer.config.parsers import parse_duration, read_text_file
 
 SERVICE_KINDS = ("robot", "groups")
-_KEYS = {
+KEYS = {
     "url",
     "username",
     "password_file",
@@ -71,9 +72,9 @@ def icinga2_config(raw: object) -> Icinga2Config:
     if not isinstance(raw, dict):
         raise ConfigError(f"icinga2: expected a mapping, got {raw!r}")
     for key in raw:
-        if key not in _KEYS:
+        if key not in KEYS:
             shown = key if isinstance(key, str) and key.isprintable() and key else repr(key)
-            raise ConfigError(f"icinga2.{shown}: unknown key (expected one of {', '.join(sorted(_KEYS))})")
+            raise ConfigError(f"icinga2.{shown}: unknown key (expected one of {', '.join(sorted(KEYS))})")
     url = _text(raw, "url", required=True)
     match = _URL.fullmatch(url)
     if match is None:

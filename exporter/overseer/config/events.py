@@ -1,0 +1,43 @@
+"""The `events:` section: the event history's SQLite file, and how much of it to keep."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+from overseer.config.parsers import boolean, parse_duration, parse_size, string
+
+MIN_EVENTS_SIZE = 1_000_000
+
+
+@dataclass(frozen=True)
+class EventsConfig:
+    """The event history: an SQLite file of the fleet's transitions, and how much of it to keep."""
+
+    enabled: bool = True
+    path: str = "overseer-events.db"  # relative to the working directory
+    retention: float = 30 * 86400.0  # seconds
+    max_size: int = 1_000_000_000  # bytes
+
+
+KEYS = {f.name for f in fields(EventsConfig)}
+
+
+def events_config(raw: dict[str, Any]) -> EventsConfig:
+    """The section from its mapping."""
+    defaults = EventsConfig()
+    return EventsConfig(
+        enabled=boolean(raw.get("enabled", defaults.enabled), "events.enabled"),
+        path=string(raw["path"], "events.path") if "path" in raw else defaults.path,
+        retention=parse_duration(raw["retention"], "events.retention")
+        if "retention" in raw
+        else defaults.retention,
+        max_size=(
+            parse_max_size(raw["max_size"], "events.max_size") if "max_size" in raw else defaults.max_size
+        ),
+    )
+
+
+def parse_max_size(value: object, key: str) -> int:
+    """The database's size limit: bytes, or a size such as `500MB`, at least 1MB."""
+    return parse_size(value, key, MIN_EVENTS_SIZE, "1MB")

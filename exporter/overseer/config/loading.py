@@ -1,0 +1,104 @@
+"""The whole configuration: one dataclass tree, read from YAML and flags, validated at start.
+
+Each section is read by its own module; this one knows which sections there are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from overseer.config import dds, events, fleet, icinga2, ingest, metrics, ros1, web, zenoh
+from overseer.config.dds import DdsConfig
+from overseer.config.errors import ConfigError
+from overseer.config.events import EventsConfig
+from overseer.config.icinga2 import Icinga2Config
+from overseer.config.ingest import IngestConfig
+from overseer.config.metrics import MetricsConfig
+from overseer.config.parsers import first_line, reject_unknown, section, string
+from overseer.config.ros1 import Ros1Config
+from overseer.config.web import WebConfig
+from overseer.config.zenoh import ZenohConfig
+from overseer.model import FleetLimits
+from overseer.model.shard import Shard
+
+LOG_LEVELS = ("debug", "info", "warning", "error")
+LOG_FORMATS = ("text", "json")
+_SECTIONS = {"web", "dds", "ros1", "zenoh", "fleet", "metrics", "ingest", "events"}
+_TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2"}
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration."""
+
+    web: WebConfig = field(default_factory=WebConfig)
+    dds: DdsConfig = field(default_factory=DdsConfig)
+    ros1: Ros1Config = field(default_factory=Ros1Config)
+    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    fleet: FleetLimits = field(default_factory=FleetLimits)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    shard: Shard = field(default_factory=Shard)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    log_level: str = "info"
+    events: EventsConfig = field(default_factory=EventsConfig)
+    log_format: str = "text"
+    icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
+
+
+def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
+    """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags."""
+    raw: dict[str, Any] = {}
+    if path is not None:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as error:
+            raise ConfigError(f"config.file: cannot read {str(path)!r}: {error.strerror}") from None
+        try:
+            loaded = yaml.safe_load(text)
+        except (yaml.YAMLError, ValueError, RecursionError) as error:  # also huge integers, deep nesting
+            raise ConfigError(f"config.file: {str(path)!r} is not valid YAML: {first_line(error)}") from None
+        if loaded is not None and not isinstance(loaded, dict):
+            raise ConfigError(f"config.file: expected a mapping at the top of {str(path)!r}")
+        raw = loaded or {}
+    for dotted, value in (overrides or {}).items():
+        name, _, key = dotted.partition(".")
+        target = raw.setdefault(name, {}) if key else raw
+        if not isinstance(target, dict):
+            raise ConfigError(f"{name}: expected a mapping, got {target!r}")
+        target[key or name] = value
+    return config_from_dict(raw)
+
+
+def config_from_dict(raw: dict[str, Any]) -> Config:
+    """Validate a parsed configuration mapping into a `Config`."""
+    reject_unknown(raw, "", _SECTIONS | _TOP_LEVEL_KEYS)
+    return Config(
+        web=web.web_config(section(raw, "web", web.KEYS)),
+        dds=dds.dds_config(section(raw, "dds", dds.KEYS)),
+        ros1=ros1.ros1_config(section(raw, "ros1", ros1.KEYS)),
+        zenoh=zenoh.zenoh_config(section(raw, "zenoh", zenoh.KEYS)),
+        fleet=fleet.fleet_limits(section(raw, "fleet", fleet.KEYS)),
+        metrics=metrics.metrics_config(section(raw, "metrics", metrics.KEYS)),
+        ingest=ingest.ingest_config(section(raw, "ingest", ingest.KEYS)),
+        events=events.events_config(section(raw, "events", events.KEYS)),
+        shard=fleet.parse_shard(raw["shard"]) if "shard" in raw else Shard(),
+        log_level=_choice(raw, "log_level", LOG_LEVELS, "info"),
+        log_format=_choice(raw, "log_format", LOG_FORMATS, "text"),
+        icinga2=None if raw.get("icinga2") is None else icinga2.icinga2_config(raw["icinga2"]),
+    )
+
+
+def _choice(raw: dict[str, Any], key: str, choices: tuple[str, ...], default: str) -> str:
+    if key not in raw:
+        return default
+    value = string(raw[key], key).lower()
+    if value not in choices:
+        expected = " or ".join(choices) if len(choices) == 2 else ", ".join(choices)
+        raise ConfigError(
+            f"{key}: expected {'one of ' if len(choices) > 2 else ''}{expected}, got {raw[key]!r}"
+        )
+    return value

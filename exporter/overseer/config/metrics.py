@@ -1,0 +1,58 @@
+"""The `metrics:` section: which key-values are exported, and which components carry their message."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+from typing import Any
+
+from overseer.config.errors import ConfigError
+from overseer.config.parsers import listed, string, whole_number
+
+MESSAGE_LABEL_MODES = ("none", "problems", "all")
+DEFAULT_MESSAGE_LABEL_LENGTH = 100
+KEYS = {"value_keys", "message_labels", "message_label_length"}
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    """What the /metrics view exports beyond levels."""
+
+    value_keys: tuple[str, ...] = (".*",)
+    # Which components get ros_diagnostics_status_message (none, problems, all), and how many characters
+    # its message label keeps, "…" included when cut.
+    message_labels: str = "problems"
+    message_label_length: int = DEFAULT_MESSAGE_LABEL_LENGTH
+
+    @property
+    def value_key_pattern(self) -> re.Pattern[str]:
+        """One compiled pattern matching every allowed key-value key in full."""
+        return re.compile("|".join(f"(?:{p})" for p in self.value_keys) or "(?!)")
+
+
+def metrics_config(raw: dict[str, Any]) -> MetricsConfig:
+    """The section from its mapping."""
+    config = MetricsConfig()
+    if "message_labels" in raw:
+        mode = raw["message_labels"]
+        if mode not in MESSAGE_LABEL_MODES:
+            raise ConfigError(
+                f"metrics.message_labels: expected one of {', '.join(MESSAGE_LABEL_MODES)}, got {mode!r}"
+            )
+        config = replace(config, message_labels=mode)
+    if "message_label_length" in raw:
+        length = whole_number(raw["message_label_length"], "metrics.message_label_length", 1, 1024)
+        config = replace(config, message_label_length=length)
+    if "value_keys" in raw:
+        patterns = tuple(
+            string(p, "metrics.value_keys") for p in listed(raw["value_keys"], "metrics.value_keys")
+        )
+        for pattern in patterns:
+            try:
+                re.compile(pattern)
+            except re.error as error:
+                raise ConfigError(
+                    f"metrics.value_keys: {pattern!r} is not a regular expression: {error}"
+                ) from None
+        config = replace(config, value_keys=patterns)
+    return config

@@ -1,0 +1,3 @@
+"""The diagnostics topics every transport follows, by their last name segment."""
+
+DIAGNOSTIC_TOPICS = ("diagnostics_agg", "diagnostics")

@@ -1,0 +1,56 @@
+"""The `web:` section: where the HTTP endpoint listens, its TLS and auth file, the URL users reach it at."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+from typing import Any
+
+from overseer.config.errors import ConfigError
+from overseer.config.parsers import string
+
+DEFAULT_PORT = 9849
+KEYS = {"listen_address", "config_file", "external_url"}
+
+
+@dataclass(frozen=True)
+class WebConfig:
+    """The HTTP endpoint; `config_file` is an exporter-toolkit web config (TLS, basic auth)."""
+
+    listen_address: str = f":{DEFAULT_PORT}"
+    config_file: str | None = None
+    external_url: str | None = None  # the URL users reach us at, for links in alerts (no trailing /)
+
+    @property
+    def host_and_port(self) -> tuple[str, int]:
+        """The address split into a bind host ('' for all interfaces) and a port."""
+        return parse_listen_address(self.listen_address)
+
+
+def parse_listen_address(value: str) -> tuple[str, int]:
+    """Split `host:port` (host may be empty or a bracketed IPv6 address) into host and port."""
+    host, sep, port = value.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ConfigError(f"web.listen_address: expected host:port, got {value!r}")
+    return host.strip("[]"), int(port)
+
+
+def web_config(raw: dict[str, Any]) -> WebConfig:
+    """The section from its mapping."""
+    config = WebConfig()
+    if "listen_address" in raw:
+        address = string(raw["listen_address"], "web.listen_address")
+        parse_listen_address(address)
+        config = replace(config, listen_address=address)
+    if raw.get("config_file") is not None:
+        config = replace(config, config_file=string(raw["config_file"], "web.config_file"))
+    if raw.get("external_url") is not None:
+        config = replace(config, external_url=_external_url(raw["external_url"]))
+    return config
+
+
+def _external_url(value: object) -> str:
+    url = string(value, "web.external_url")
+    if not re.fullmatch(r"https?://[^/\s?#]+(/[^\s?#]*)?", url):
+        raise ConfigError(f"web.external_url: expected http(s)://HOST[:PORT][/PATH], got {url!r}")
+    return url.rstrip("/")
