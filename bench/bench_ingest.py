@@ -20,11 +20,11 @@ from bench.common import Row, emit, interleaved_rates
 from overseer.codec import compiled
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.codec.wire import decode_array
+from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
-from overseer.sources.dds_types import DiagnosticArray as IdlDiagnosticArray
-from overseer.sources.ingest import PayloadIngest
+from overseer.sources.dds.types import DiagnosticArray as IdlDiagnosticArray
 
 ROBOTS = 1000
 WORST_CASE = "every status changed (worst case)"

@@ -22,6 +22,7 @@ from playwright.sync_api import Browser
 
 from bench.common import Row, emit
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
+from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.assembler import ExpositionAssembler
@@ -29,7 +30,6 @@ from overseer.serve.exposition import FleetExposition
 from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
-from overseer.sources.ingest import PayloadIngest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))

@@ -24,10 +24,10 @@ from hypothesis import strategies as st
 
 from overseer.codec import DecodeError, cdr, compiled, ros1
 from overseer.codec.wire import StatusReader, WireFormat, decode_array, decode_laid_out
+from overseer.ingest.scan import scan_python
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits
 from overseer.model.fleet import _intact
-from overseer.sources import ingest
 from support import strategies
 from support.codec_paths import codec_path
 from support.processes import running_exporter, wait_for
@@ -127,7 +127,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits
 from overseer.model.fleet import _intact
 from overseer.model import FleetModel
-from overseer.sources.ingest import PayloadIngest
+from overseer.ingest.payload import PayloadIngest
 array = DiagnosticArray(1, 2, "f", (DiagnosticStatus(1, "/a", "m", "hw", (("k", "v"),)),))
 model = FleetModel()
 ingest = PayloadIngest(model, "r1", "dds", "t", cdr.WIRE_FORMAT)
@@ -224,7 +224,7 @@ def test_the_changed_statuses_scan_alike(
         if in_c:
             found = outcome(lambda: compiled.scan_changed(layout, *args, max_length, max_values))
         else:
-            found = outcome(lambda: ingest._scan_changed(LAYOUTS[name][2], *args))
+            found = outcome(lambda: scan_python(LAYOUTS[name][2], *args))
         return found, bounds.tolist(), scanned_hashes.tolist()
 
     (found, *in_c), (expected, *in_python) = scan(in_c=True), scan(in_c=False)

@@ -16,8 +16,8 @@ from cyclonedds.domain import Domain
 from overseer.cli import main
 from overseer.config import ConfigError, config_from_dict, load_config
 from overseer.config.dds import DdsPeer
-from overseer.sources.cyclone_config import loopback_only_config, peers_config
-from overseer.sources.dds_peers import peer_addresses
+from overseer.sources.dds.cyclone_config import loopback_only_config, peers_config
+from overseer.sources.dds.peers import peer_addresses
 from support.ports import free_port, fresh_domain_id
 from support.processes import (
     Exporter,

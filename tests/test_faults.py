@@ -178,7 +178,7 @@ def test_restarted_exporter_has_the_whole_fleet_within_one_period_after_discover
 PUBLISHER = """
 import sys
 from overseer.simulator.publisher import FleetSimulator, SimulatorSettings
-from overseer.sources.cyclone_config import configure_domain
+from overseer.sources.dds.cyclone_config import configure_domain
 
 domain = int(sys.argv[1])
 configure_domain(domain, sys.argv[2])

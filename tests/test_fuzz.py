@@ -32,7 +32,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.serve.web_config import load_web_config, web_security_from_dict
-from overseer.sources.ros1_tcpros import TcprosError, decode_header
+from overseer.sources.ros1.tcpros import TcprosError, decode_header
 from support.oracle import parse_openmetrics
 from support.rendering import Rendering
 

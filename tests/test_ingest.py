@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 
 from overseer.codec import DecodeError, cdr, ros1
 from overseer.codec.wire import ArrayHead, WireFormat, decode_array, decode_laid_out
+from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, FleetSnapshot
-from overseer.sources.ingest import PayloadIngest
 from support.codec_paths import CODEC_PATHS, codec_path
 
 

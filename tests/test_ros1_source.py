@@ -23,15 +23,15 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.api import robot_document
 from overseer.sources import ros1 as ros1_source
-from overseer.sources.ros1 import Ros1Source
-from overseer.sources.ros1_tcpros import (
+from overseer.sources.ros1.source import Ros1Source
+from overseer.sources.ros1.tcpros import (
     TcprosError,
     check_publisher_header,
     decode_header,
     encode_header,
     subscriber_header,
 )
-from overseer.sources.ros1_xmlrpc import RosApiError, ros_call
+from overseer.sources.ros1.xmlrpc import RosApiError, ros_call
 from support.ports import free_port
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.ros1 import (

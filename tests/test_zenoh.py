@@ -17,7 +17,7 @@ from zenoh.ext import Int64, UInt8, z_deserialize
 
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.sources.zenoh_keys import DIAGNOSTIC_ARRAY_HASH, DIAGNOSTIC_ARRAY_TYPE, data_key
+from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, DIAGNOSTIC_ARRAY_TYPE, data_key
 from support.nagios import run_check
 from support.ports import free_port
 from support.processes import Exporter, running_exporter, running_simulator, wait_for

@@ -9,7 +9,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from overseer.config import ConfigError, load_config
 from overseer.config.zenoh import ZenohConfig
-from overseer.sources.zenoh_keys import (
+from overseer.sources.zenoh.keys import (
     BRIDGE,
     DIAGNOSTIC_ARRAY_HASH,
     DIAGNOSTIC_ARRAY_TYPE,
@@ -24,7 +24,7 @@ from overseer.sources.zenoh_keys import (
     parse_publisher_token,
     publisher_token,
 )
-from overseer.sources.zenoh_session import session_config
+from overseer.sources.zenoh.session import session_config
 
 
 def test_the_type_hash_is_diagnostic_arrays_in_jazzy_as_rosbags_computes_it() -> None:

@@ -493,7 +493,7 @@ def _simulate(args: argparse.Namespace) -> int:
 def _zenoh_simulator(args: argparse.Namespace, settings: Any) -> Any:
     """The simulator publishing over Zenoh, as rmw_zenoh or as zenoh-bridge-ros2dds does."""
     from overseer.simulator.zenoh_publisher import ZenohFleetSimulator, ZenohSettings
-    from overseer.sources.zenoh_keys import DIAGNOSTIC_ARRAY_HASH
+    from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH
 
     type_hash = args.zenoh_type_hash or DIAGNOSTIC_ARRAY_HASH
     if not re.fullmatch(r"[A-Za-z0-9_]+", type_hash):

@@ -11,9 +11,9 @@ from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
-from overseer.sources.cyclone_config import configure_domain, loopback_only_config
-from overseer.sources.dds import ROS_DEFAULT_QOS
-from overseer.sources.dds_types import DiagnosticArray
+from overseer.sources.dds.cyclone_config import configure_domain, loopback_only_config
+from overseer.sources.dds.source import ROS_DEFAULT_QOS
+from overseer.sources.dds.types import DiagnosticArray
 
 
 class RawDiagnosticsWriter:

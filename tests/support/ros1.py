@@ -22,8 +22,8 @@ from typing import Any
 from xmlrpc.server import SimpleXMLRPCServer
 
 from overseer.codec.ros1 import MD5SUM, MESSAGE_TYPE
-from overseer.sources.ros1_tcpros import MAX_HEADER_BYTES, decode_header, encode_header, read_block
-from overseer.sources.ros1_xmlrpc import RosApiError, ros_call
+from overseer.sources.ros1.tcpros import MAX_HEADER_BYTES, decode_header, encode_header, read_block
+from overseer.sources.ros1.xmlrpc import RosApiError, ros_call
 from support.ports import free_port
 from support.processes import RunningProcess, spawn, wait_for
 

@@ -20,8 +20,8 @@ from overseer.codec.ros1 import decode_diagnostic_array
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.api import robot_document
-from overseer.sources.ros1_tcpros import TcprosError, read_frame, subscribe
-from overseer.sources.ros1_xmlrpc import CALL_TIMEOUT_SECONDS, RosApiError, request_topic, topic_publishers
+from overseer.sources.ros1.tcpros import TcprosError, read_frame, subscribe
+from overseer.sources.ros1.xmlrpc import CALL_TIMEOUT_SECONDS, RosApiError, request_topic, topic_publishers
 
 # The ROS 1 source's transport label; overseer.sources.ros1 is not imported for it because it
 # loads the slave API server, which would double the check's start-up time.

@@ -1,7 +1,7 @@
 """What the codecs share: an array's header read apart from its statuses, and how a format is laid out.
 
 Reading the header first and then one status at a time lets an ingest decode only the statuses that
-changed since a robot's last array (`overseer.sources.ingest`).
+changed since a robot's last array (`overseer.ingest`).
 """
 
 from __future__ import annotations

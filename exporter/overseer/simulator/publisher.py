@@ -25,15 +25,15 @@ from overseer.config.dds import DEFAULT_MAX_PARTICIPANT_INDEX, DdsPeer
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.simulator.design import LeafComponent, aggregated_statuses, initial_levels, leaf_components
-from overseer.sources.cyclone_config import (
+from overseer.sources.dds.cyclone_config import (
     LOOPBACK_MAX_PARTICIPANTS,
     configure_domain,
     loopback_only_config,
     peers_config,
 )
-from overseer.sources.dds import ROS_DEFAULT_QOS
-from overseer.sources.dds_peers import peer_addresses
-from overseer.sources.dds_types import DiagnosticArray as DdsDiagnosticArray
+from overseer.sources.dds.peers import peer_addresses
+from overseer.sources.dds.source import ROS_DEFAULT_QOS
+from overseer.sources.dds.types import DiagnosticArray as DdsDiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, dds_topic_name
 
 log = logging.getLogger(__name__)

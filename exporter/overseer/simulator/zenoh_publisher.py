@@ -20,7 +20,7 @@ from hashlib import blake2b
 import zenoh
 
 from overseer.simulator.publisher import FleetSimulator, SimulatedRobot, SimulatorSettings
-from overseer.sources.zenoh_keys import (
+from overseer.sources.zenoh.keys import (
     DIAGNOSTIC_ARRAY_HASH,
     bridge_key,
     bridge_publisher_token,

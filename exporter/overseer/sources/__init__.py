@@ -32,16 +32,16 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
     """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started."""
     sources: list[Source] = []
     if config.dds.enabled:
-        from overseer.sources.dds import DdsSource
+        from overseer.sources.dds.source import DdsSource
 
         sources.append(DdsSource(config.dds, model, config.shard))
     if config.ros1.enabled:
-        from overseer.sources.ros1 import Ros1Source
+        from overseer.sources.ros1.source import Ros1Source
 
         robots = tuple(robot for robot in config.ros1.robots if config.shard.owns(robot.name))
         sources.append(Ros1Source(replace(config.ros1, robots=robots), model))
     if config.zenoh.enabled:
-        from overseer.sources.zenoh import ZenohSource
+        from overseer.sources.zenoh.source import ZenohSource
 
         sources.append(ZenohSource(config.zenoh, model, config.shard))
     return sources

@@ -20,11 +20,11 @@ from typing import Any
 from overseer.codec import DecodeError
 from overseer.codec.ros1 import MESSAGE_TYPE, WIRE_FORMAT
 from overseer.config.ros1 import Ros1Config, Ros1Robot
+from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
-from overseer.sources.ingest import PayloadIngest
-from overseer.sources.ros1_slave import SlaveApi
-from overseer.sources.ros1_tcpros import TcprosError, read_frame, subscribe
-from overseer.sources.ros1_xmlrpc import (
+from overseer.sources.ros1.slave import SlaveApi
+from overseer.sources.ros1.tcpros import TcprosError, read_frame, subscribe
+from overseer.sources.ros1.xmlrpc import (
     CALL_TIMEOUT_SECONDS,
     RosApiError,
     register_subscriber,

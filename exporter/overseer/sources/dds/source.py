@@ -24,18 +24,18 @@ from cyclonedds.util import duration
 
 from overseer.codec import DecodeError, cdr
 from overseer.config.dds import DdsConfig, DdsPeer, DomainConfig
+from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.cyclone_config import (
+from overseer.sources.dds.cyclone_config import (
     LOOPBACK_MAX_PARTICIPANTS,
     configure_domain,
     loopback_only_config,
     peers_config,
 )
-from overseer.sources.cyclone_log import CycloneWarnings
-from overseer.sources.dds_peers import peer_addresses
-from overseer.sources.dds_types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
-from overseer.sources.ingest import PayloadIngest
+from overseer.sources.dds.cyclone_log import CycloneWarnings
+from overseer.sources.dds.peers import peer_addresses
+from overseer.sources.dds.types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
 log = logging.getLogger(__name__)

@@ -17,7 +17,7 @@ from typing import Any
 from urllib.parse import urlsplit
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
-from overseer.sources.ros1_xmlrpc import RosApiError, uri_list
+from overseer.sources.ros1.xmlrpc import RosApiError, uri_list
 
 REQUEST_TIMEOUT_SECONDS = 5.0
 

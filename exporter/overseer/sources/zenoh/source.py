@@ -19,11 +19,11 @@ from zenoh.handlers import FifoChannel
 
 from overseer.codec import DecodeError, cdr
 from overseer.config.zenoh import ZenohConfig
+from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.ingest import PayloadIngest
 from overseer.sources.topic_names import AGGREGATED, RAW
-from overseer.sources.zenoh_keys import (
+from overseer.sources.zenoh.keys import (
     BRIDGE,
     DIAGNOSTIC_ARRAY_HASH,
     RMW_ZENOH,
@@ -36,7 +36,7 @@ from overseer.sources.zenoh_keys import (
     parse_data_key,
     parse_publisher_token,
 )
-from overseer.sources.zenoh_session import session_config
+from overseer.sources.zenoh.session import session_config
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from typing import Any
 from urllib.parse import urlsplit
 from xml.parsers.expat import ExpatError
 
-from overseer.sources.ros1_tcpros import describe
+from overseer.sources.ros1.tcpros import describe
 
 MAX_ANSWER_BYTES = 4 * 1024 * 1024
 CALL_TIMEOUT_SECONDS = 5.0

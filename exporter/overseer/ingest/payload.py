@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 from overseer.codec import DecodeError, compiled
 from overseer.codec.wire import StatusReader, WireFormat, decode_laid_out
-from overseer.messages import DiagnosticStatus
+from overseer.ingest.scan import scan_compiled, scan_python
 from overseer.model import FleetModel
 
 
@@ -36,7 +36,7 @@ class PayloadIngest:
     are kept: the payload would cost about 90 bytes a component, a tenth of the memory budget. The
     hashes are Python's keyed 64-bit SipHash (seeded per process), so no robot can aim a collision.
     With the compiled decoder, the comparison and the decoding of what changed run in C
-    (`compiled.scan_changed`, the same hashes); `_scan_changed` is the pure-Python reference.
+    (`scan.scan_compiled`, the same hashes); `scan.scan_python` is the pure-Python reference.
     """
 
     def __init__(self, model: FleetModel, robot: str, transport: str, topic: str, wire: WireFormat) -> None:
@@ -103,7 +103,7 @@ class PayloadIngest:
         compiled_layout = compiled.LAYOUTS.get(layout.read_status)
         if compiled_layout is not None:
             limits = self._model.limits
-            changed, pos, fits = compiled.scan_changed(
+            changed, pos, fits = scan_compiled(
                 compiled_layout,
                 payload,
                 pos,
@@ -115,7 +115,7 @@ class PayloadIngest:
                 limits.max_values_per_component,
             )
         else:
-            changed, pos = _scan_changed(layout.read_status, payload, pos, end, bounds, hashes, misaligned)
+            changed, pos = scan_python(layout.read_status, payload, pos, end, bounds, hashes, misaligned)
             fits = False  # the model checks
         if pos > end or (wire.exact_end and pos != end):
             return None
@@ -131,33 +131,3 @@ class PayloadIngest:
         if revision is None:
             return None
         return layout._replace(revision=revision, fingerprint=fingerprint)
-
-
-def _scan_changed(
-    read_status: StatusReader,
-    payload: bytes,
-    pos: int,
-    end: int,
-    bounds: array[int],
-    hashes: array[int],
-    misaligned: int,
-) -> tuple[list[tuple[int, DiagnosticStatus]], int]:
-    """The statuses that changed since the last payload, and where the last status ended.
-
-    A status whose bytes hash as they did, at an offset that keeps the alignment, is skipped; any other
-    is decoded and its bound and hash updated in place. `compiled.scan_changed` does the same in C.
-    """
-    changed: list[tuple[int, DiagnosticStatus]] = []
-    shift = 0  # how much later than in the last payload the statuses now sit
-    for index, old_hash in enumerate(hashes):
-        after = bounds[index + 1] + shift
-        if shift & misaligned or hash(payload[pos:after]) != old_hash:
-            status, after = read_status(payload, pos, end)
-            changed.append((index, status))
-            hashes[index] = hash(payload[pos:after])
-            shift = after - bounds[index + 1]
-            bounds[index + 1] = after
-        elif shift:
-            bounds[index + 1] = after
-        pos = after
-    return changed, pos
