@@ -25,6 +25,7 @@ lint: setup system-deps
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
+	$(BIN)/lint-imports --no-logo
 	promtool check rules alert_rules/overseer.rules.yml alert_rules/overseer-fast.rules.yml
 	promtool test rules alert_rules/overseer.rules.test.yml
 	promtool check config deploy/prometheus/prometheus.yml deploy/prometheus/prometheus-fast.yml

@@ -22,13 +22,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.common import Row, emit
-from overseer.history.detector import TransitionDetector
-from overseer.history.events import Event
 from overseer.history.query import EventQuery
 from overseer.history.store import EventStore, StoreSettings
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.model.events import Event
+from overseer.model.transitions import TransitionDetector
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 
 ROBOTS = 1000

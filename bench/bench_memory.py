@@ -12,11 +12,11 @@ import re
 
 from bench.common import Row, emit, resident_bytes
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
+from overseer.fleet.exposition import FleetExposition
 from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 
 ROBOTS = 2000

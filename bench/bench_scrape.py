@@ -39,12 +39,12 @@ from typing import Any
 from prometheus_client import CollectorRegistry, Counter, Gauge, start_http_server
 
 from bench.common import Row, emit, tree_cpu_seconds
+from overseer.fleet.exposition import FleetExposition
+from overseer.fleet.local import LocalFleet
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
 from overseer.serve.exposition_formats import TEXT
-from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 
@@ -327,7 +327,7 @@ def measure_in_process(series_wanted: int) -> list[Row]:
     while robots * per_robot < series_wanted:
         model.apply(f"robot{robots}", statuses_for(robots, 0), "dds")
         robots += 1
-    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition, assembler))
+    server = OverseerServer(("127.0.0.1", 0), LocalFleet(model, [], exposition), assembler)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     series = assembler.assemble([exposition.render_part()], TEXT).count(b"\n") - 34
     stop_naive, naive_url = naive_exporter(model)

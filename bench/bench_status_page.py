@@ -10,10 +10,8 @@ The 100-robot fleet gives the ratio that shows how the page scales.
 
 from __future__ import annotations
 
-import re
 import statistics
 import sys
-import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -25,11 +23,8 @@ from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.fleet_view import ModelView
-from overseer.serve.http import OverseerServer
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
+from testbed.model_server import serving
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -83,10 +78,7 @@ def measure(browser: Browser, robots: int) -> dict[str, float]:
     """Figures of one fleet size: page first renders, and the JSON the page reads."""
     model = FleetModel(FleetLimits(max_robots=100_000, stale_after=3600, robot_timeout=3600))
     fill(model, robots)
-    view = ModelView(model, FleetExposition(model, re.compile(".*")), ExpositionAssembler(["dds"]))
-    server = OverseerServer(("127.0.0.1", 0), view)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
+    with serving(model) as server:
         figures = {
             "fleet": first_render_ms(browser, server.url + "/", "fleet"),
             "filtered": first_render_ms(
@@ -99,9 +91,6 @@ def measure(browser: Browser, robots: int) -> dict[str, float]:
             server.url + "/api/v1/components?q=no%20scans&limit=200"
         )
         return figures
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def main() -> None:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
-import threading
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -12,21 +10,18 @@ from typing import Any
 
 import pytest
 
+from overseer.fleet.documents import (
+    COMPONENTS_MAX_LIMIT,
+    ComponentQuery,
+    components_document,
+    robots_document,
+)
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.api import (
-    COMPONENTS_MAX_LIMIT,
-    ComponentQuery,
-    ComponentQueryError,
-    components_document,
-    parse_component_query,
-    robots_document,
-)
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.fleet_view import ModelView
+from overseer.serve.api_query import ComponentQueryError, parse_component_query
 from overseer.serve.http import OverseerServer
+from testbed.model_server import serving
 
 
 class ManualClock:
@@ -178,16 +173,8 @@ def test_bad_parameters_are_refused_naming_the_parameter_and_value(
 @pytest.fixture
 def server(fleet: tuple[FleetModel, ManualClock]) -> Iterator[OverseerServer]:
     """The real HTTP server over the fleet, on a free loopback port."""
-    model = fleet[0]
-    exposition = FleetExposition(model, re.compile(".*"))
-    server = OverseerServer(("127.0.0.1", 0), ModelView(model, exposition, ExpositionAssembler(["dds"])))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
+    with serving(fleet[0]) as server:
         yield server
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def get(server: OverseerServer, path: str) -> tuple[int, Any]:

@@ -8,9 +8,10 @@ import sys
 import pytest
 
 from overseer import __version__
+from overseer.check.document import CheckError
 from overseer.check.http_client import parse_answer, parse_url, quote_path, request_bytes
 from overseer.check.plugin import main, options_from_flags, parse_flags
-from overseer.check.report import CRITICAL, UNKNOWN, WARNING, CheckError
+from overseer.verdict import CRITICAL, UNKNOWN, WARNING
 
 TIMEOUT_HINT = "give seconds, more than 0 and less than a day"
 
@@ -209,7 +210,8 @@ def test_check_imports_no_json_re_or_typing_only_c_modules_and_its_own() -> None
         "overseer.check.plugin",
         "overseer.check.http_client",
         "overseer.check.api_reader",
-        "overseer.check.report",
+        "overseer.check.document",
+        "overseer.verdict",
     }
 
 

@@ -7,11 +7,11 @@ import itertools
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from overseer.history.detector import TransitionDetector
-from overseer.history.events import Event
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.model.events import Event
+from overseer.model.transitions import TransitionDetector
 
 STALE_AFTER, ROBOT_TIMEOUT, EXPIRE_AFTER = 5.0, 10.0, 60.0
 

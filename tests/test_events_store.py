@@ -15,11 +15,11 @@ import pytest
 from prometheus_client import generate_latest
 from prometheus_client.registry import CollectorRegistry
 
-from overseer.history.events import Event
 from overseer.history.metrics import EventsCollector
 from overseer.history.query import EventQuery, decode_cursor
 from overseer.history.store import EventStore, EventsUnavailable, StoreSettings
 from overseer.levels import Level
+from overseer.model.events import Event
 
 DAY = 86400.0
 HOSTILE = [

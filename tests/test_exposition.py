@@ -7,11 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from overseer.config.metrics import MESSAGE_LABEL_MODES
+from overseer.fleet import exposition as exposition_module
+from overseer.fleet.message_labels import MessageLabels
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve import exposition as exposition_module
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
-from overseer.serve.message_labels import MessageLabels
 from support.rendering import FORMATS, Rendering
 
 

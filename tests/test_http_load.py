@@ -27,9 +27,6 @@ import pytest
 import overseer.serve.http
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import (
     MAX_CONCURRENT_REQUESTS,
     MAX_CONNECTIONS,
@@ -39,6 +36,7 @@ from overseer.serve.http import (
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.scrapes import Scrape, parse_scrape
+from testbed.model_server import serving
 
 ROBOTS, COMPONENTS_PER_ROBOT, RATE_HZ = 50, 25, 5.0  # --components=20 leaves plus 5 group statuses
 SCRAPERS, LOAD_SECONDS = 20, 20.0
@@ -214,15 +212,8 @@ def in_process_server(robots: int) -> Iterator[OverseerServer]:
     array = DiagnosticArray(0, 0, "", tuple(aggregated_statuses(leaves, initial_levels(leaves, 1, 1), set())))
     for index in range(robots):
         model.apply(f"robot{index}", array, "dds")
-    view = ModelView(model, FleetExposition(model, re.compile(".*")), ExpositionAssembler(["dds"]))
-    server = OverseerServer(("127.0.0.1", 0), view)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
+    with serving(model) as server:
         yield server
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def test_a_client_that_never_reads_its_answer_is_cut_off_at_the_deadline(

@@ -22,7 +22,6 @@ from overseer.config import ConfigError
 from overseer.config.icinga2 import icinga2_config
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_push import HOST_SILENT_TEXT
-from overseer.push.icinga2_results import split_perfdata
 from support.icinga2 import (
     PUSH_CERT_USER,
     Icinga2,
@@ -105,16 +104,6 @@ def test_names_map_robots_to_icinga_objects_reversibly() -> None:
     assert re.search(group_pattern("Power"), "/Power/Robot Battery")
     assert re.search(group_pattern("Power"), "/Power")
     assert not re.search(group_pattern("Power"), "/PowerSupply/x")
-
-
-def test_perfdata_is_split_on_spaces_outside_quoted_labels() -> None:
-    text = "'error'=2;;;0 'Power:Robot Battery:voltage'=12.5;;;; 'it''s'=1;;;;"
-    assert split_perfdata(text) == (
-        "'error'=2;;;0",
-        "'Power:Robot Battery:voltage'=12.5;;;;",
-        "'it''s'=1;;;;",
-    )
-    assert split_perfdata("") == ()
 
 
 @pytest.mark.parametrize(

@@ -19,11 +19,10 @@ from overseer.config import Config
 from overseer.config.dds import DdsConfig, DomainConfig
 from overseer.config.events import EventsConfig
 from overseer.config.ingest import IngestConfig
+from overseer.fleet.pooled import PooledFleet
+from overseer.fleet.workers import pool as pool_module
+from overseer.fleet.workers.pool import WorkersUnavailable
 from overseer.model.shard import Shard
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.workers import pool as pool_module
-from overseer.workers.pool import WorkerPool, WorkersUnavailable
-from overseer.workers.view import PooledSnapshots, PooledView
 from support.nagios import run_check
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
 from support.zenoh import exporter_args, running_router, simulator_args
@@ -190,8 +189,9 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
         events=EventsConfig(enabled=False),
         ingest=IngestConfig(workers=2),
     )
-    pool = WorkerPool(config)
-    pool.start()
+    fleet = PooledFleet(config)
+    fleet.start()
+    pool = fleet.pool
     try:
         assert len(pool.ask_all("robots")) == 2
         hung = pool.pid(1)
@@ -206,19 +206,18 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
         assert len(pool.ask_all("robots")) == 2
         assert pool.restarts[0] == 0
         # Stopped again: the API answers 503 for its robots, and the Icinga 2 push gets no partial fleet.
-        view = PooledView(pool, ExpositionAssembler(["dds"]))
         owned_by_1 = next(f"robot{i}" for i in range(100) if Shard().for_worker(1, 2).owns(f"robot{i}"))
         os.kill(pool.pid(1) or 0, signal.SIGSTOP)
         with pytest.raises(WorkersUnavailable, match=f"ingest worker 1, which follows '{owned_by_1}'"):
-            view.robot_document(owned_by_1)
+            fleet.robot_document(owned_by_1)
         wait_for(lambda: pool.restarts[1] == 2 and pool.up(1), 20, message="restarted again")
         os.kill(pool.pid(1) or 0, signal.SIGSTOP)
         with pytest.raises(WorkersUnavailable, match=r"ingest worker \[1\] did not answer"):
-            PooledSnapshots(pool).snapshot()
+            fleet.snapshot()
         wait_for(lambda: pool.restarts[1] == 3 and pool.up(1), 20, message="restarted a third time")
-        assert PooledSnapshots(pool).snapshot().robots == ()
+        assert fleet.snapshot().robots == ()
     finally:
-        pool.stop()
+        fleet.stop()
 
 
 def test_a_stop_sent_to_the_whole_process_group_restarts_no_worker(tmp_path: Path, dds_domain: int) -> None:

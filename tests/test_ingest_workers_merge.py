@@ -17,14 +17,9 @@ from hypothesis import strategies as st
 from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.config import Config
-from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.model import FleetLimits, FleetModel
-from overseer.model.shard import Shard
-from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import ExpositionPart, FleetExposition
-from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
-from overseer.workers.merge import (
+from overseer.fleet.documents import ComponentQuery, components_document, robot_document, robots_document
+from overseer.fleet.exposition import ExpositionPart, FleetExposition
+from overseer.fleet.workers.merge import (
     CounterCarry,
     counters_part,
     merge_components_documents,
@@ -33,7 +28,12 @@ from overseer.workers.merge import (
     part_counters,
     portable_robots,
 )
-from overseer.workers.process import worker_config
+from overseer.fleet.workers.process import worker_config
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.model.shard import Shard
+from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
 from support.oracle import parse_openmetrics
 from support.strategies import arrays
 

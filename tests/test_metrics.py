@@ -9,11 +9,11 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.codec import compiled
+from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
+from overseer.fleet.metric_values import numeric_value
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
-from overseer.serve.metric_values import numeric_value
 from support.oracle import parse_openmetrics
 from support.rendering import Rendering
 

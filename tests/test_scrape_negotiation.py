@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import gzip
 import http.server
-import re
 import threading
 import time
 import urllib.request
@@ -22,16 +21,14 @@ import pytest
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetModel
-from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
-from overseer.serve.fleet_view import ModelView
 from overseer.serve.http import OverseerServer
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from support.oracle import parse_openmetrics
 from support.ports import free_port
 from support.processes import wait_for
 from support.prometheus import running_prometheus
+from testbed.model_server import serving
 
 PROMETHEUS_2 = (
     "application/openmetrics-text;version=1.0.0,application/openmetrics-text;version=0.0.1;q=0.75,"
@@ -142,14 +139,8 @@ def fleet_server() -> Iterator[OverseerServer]:
             DiagnosticStatus(0, "/Motor", "ok", "", ()),
         )
         model.apply(robot, DiagnosticArray(0, 0, "", statuses), "dds")
-    view = ModelView(model, FleetExposition(model, re.compile(".*")), ExpositionAssembler(["dds"]))
-    server = OverseerServer(("127.0.0.1", 0), view)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
+    with serving(model) as server:
         yield server
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def fetch(server: OverseerServer, accept: str | None, use_gzip: bool) -> tuple[str, str | None, bytes]:

@@ -403,7 +403,7 @@ def _run(args: argparse.Namespace) -> int:
     config = load_config(args.config_file, _exporter_overrides(args))
     configure_logging(config.log_level, config.log_format)
     from overseer.app import Exporter
-    from overseer.workers.pool import WorkerStartError
+    from overseer.fleet.workers.pool import WorkerStartError
 
     try:
         exporter = Exporter(config)

@@ -18,10 +18,10 @@ from prometheus_client.registry import Collector, CollectorRegistry
 
 from overseer import __version__
 from overseer.codec import compiled
+from overseer.fleet import metric_families as contract
+from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
+from overseer.fleet.metric_values import DROP_REASONS, NumericValues, message_counts
 from overseer.model import FleetModel
-from overseer.serve import metric_families as contract
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
-from overseer.serve.metric_values import DROP_REASONS, NumericValues, message_counts
 
 
 def family(spec: contract.MetricFamily) -> Metric:

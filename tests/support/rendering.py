@@ -7,11 +7,11 @@ from collections.abc import Iterable
 
 from prometheus_client.registry import Collector
 
+from overseer.fleet.exposition import FleetExposition
+from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 from overseer.model import FleetModel
 from overseer.serve.assembler import ExpositionAssembler
-from overseer.serve.exposition import FleetExposition
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
 
 FORMATS = (TEXT, OPENMETRICS)

@@ -12,7 +12,7 @@ import _socket
 import time
 
 from overseer import __version__
-from overseer.check.report import CheckError
+from overseer.check.document import CheckError
 
 _MAX_ANSWER_BYTES = 64 * 1024 * 1024
 _UNRESERVED = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-._~/")

@@ -12,17 +12,9 @@ import sys
 
 from overseer import __version__
 from overseer.check import api_reader
+from overseer.check.document import CheckError, robot_from_document
 from overseer.check.http_client import Answer, Tls, get, parse_url, quote_path
-from overseer.check.report import (
-    CRITICAL,
-    UNKNOWN,
-    WARNING,
-    CheckError,
-    Settings,
-    clean,
-    judge,
-    robot_from_document,
-)
+from overseer.verdict import CRITICAL, UNKNOWN, WARNING, Settings, clean, judge, plugin_output
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (14 ms)
 if TYPE_CHECKING:
@@ -346,8 +338,10 @@ def seconds(text: str) -> float:
 
 def check(options: Options) -> tuple[int, str]:
     """Read the robot from the exporter (or straight from its ROS 1 master) and judge it."""
+    settings = options.settings
     if options.ros_master:
-        return judge(robot_from_document(read_from_master(options)), options.settings)
+        verdict = judge(robot_from_document(read_from_master(options)), settings)
+        return verdict.state, plugin_output(verdict, settings.verbosity)
     url = f"{options.url}/api/v1/robots/{quote_path(options.robot)}"
     answer = get(url, options.timeout, options.authorization, options.tls)
     check_status(answer, url, options)
@@ -359,10 +353,11 @@ def check(options: Options) -> tuple[int, str]:
         robot = robot_from_document(document)
     except CheckError as error:
         raise CheckError(f"unexpected answer from {url}: {error}") from None
-    state, text = judge(robot, options.settings)
-    if options.settings.verbosity > 1:
+    verdict = judge(robot, settings)
+    text = plugin_output(verdict, settings.verbosity)
+    if settings.verbosity > 1:
         text += f"\nRead {url} (HTTP {answer.status}, {len(answer.body)} bytes)"
-    return state, text
+    return verdict.state, text
 
 
 def read_from_master(options: Options) -> dict[str, object]:

@@ -17,9 +17,9 @@ from typing import Any
 
 from overseer.codec import DecodeError
 from overseer.codec.ros1 import decode_diagnostic_array
+from overseer.fleet.documents import robot_document
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.api import robot_document
 from overseer.sources.ros1.tcpros import TcprosError, read_frame, subscribe
 from overseer.sources.ros1.xmlrpc import CALL_TIMEOUT_SECONDS, RosApiError, request_topic, topic_publishers
 

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from overseer.history.events import Event
 from overseer.history.query import EventQuery, encode_cursor
 from overseer.levels import Level
+from overseer.model.events import Event
 
 log = logging.getLogger(__name__)
 event_log = logging.getLogger("overseer.events")

@@ -1,7 +1,8 @@
 """An immutable view of the fleet at one instant, and the judgements that depend on time.
 
 Staleness and robot up/down are derived from the snapshot's time, never stored, so they cannot drift
-from the clock.
+from the clock. This is the one place that judges them: every output (metrics, API, event history,
+Icinga 2) asks the snapshot, and so says the same thing at the same instant.
 """
 
 from __future__ import annotations
@@ -33,6 +34,24 @@ class FleetSnapshot:
             and self.taken_at - robot.last_message <= self.limits.robot_timeout
         )
 
+    def went_down_at(self, robot: RobotState) -> float:
+        """When a robot that is down went down: `robot_timeout` after its last message (or discovery).
+
+        When its publisher left first, the transport said so at once: then it went down now.
+        """
+        last = robot.last_message if robot.last_message is not None else robot.discovered_at
+        timed_out = last + self.limits.robot_timeout
+        return min(self.taken_at, timed_out) if not robot.publisher_alive else timed_out
+
+    @property
+    def stale_before(self) -> float:
+        """Updates before this unix time are stale now (`stale_after` ago)."""
+        return self.taken_at - self.limits.stale_after
+
+    def went_stale_at(self, updated: float) -> float:
+        """When something last updated at `updated` turned (or turns) STALE."""
+        return updated + self.limits.stale_after
+
     @staticmethod
     def last_update(robot: RobotState, key: ComponentKey, component: Component) -> float:
         """When the component was last reported."""
@@ -50,7 +69,7 @@ class FleetSnapshot:
 
     def fresh(self, updated: float | None) -> bool:
         """True when something updated at `updated` (None: never) is within `stale_after` of now."""
-        return updated is not None and self.taken_at - updated <= self.limits.stale_after
+        return updated is not None and updated >= self.stale_before
 
     def component_levels(self, robot: RobotState, robot_up: bool) -> list[Level]:
         """Every component's level now, in the order of `robot.components` (as `component_level`)."""

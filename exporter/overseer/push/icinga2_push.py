@@ -1,6 +1,6 @@
 """The push loop: registers every robot in Icinga 2 and delivers its check results.
 
-It reads `model.snapshot()` every tick. A robot whose level (or up/down, or set of components)
+It reads `fleet.snapshot()` every tick. A robot whose level (or up/down, or set of components)
 changed has its results queued as urgent at once; every robot's results are queued again every
 `interval`. Pending results are kept as the latest one per host and service, never as a queue of
 every intermediate one, so after an outage Icinga gets the state now. Objects are created on first
@@ -14,20 +14,20 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any
 
 from overseer.config.icinga2 import Icinga2Config
+from overseer.fleet.interface import Fleet, FleetPartUnavailable
 from overseer.model import FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
-from overseer.serve.fleet_view import FleetPartUnavailable
 
 log = logging.getLogger(__name__)
 
 TICK_SECONDS = 0.25
-BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the model again
+BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the fleet again
 BACKOFF_MIN, BACKOFF_MAX = 1.0, 30.0
 SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
@@ -35,28 +35,20 @@ HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: 
 FALLBACK_CHECK_INTERVAL = 86400.0
 
 
-class FleetSource(Protocol):
-    """Where the push reads the fleet: the model, or the view joining the ingest workers' models."""
-
-    def snapshot(self) -> FleetSnapshot:
-        """The whole fleet now."""
-        ...
-
-
 class Icinga2Push:
-    """Keeps Icinga 2's hosts and services in step with the fleet model."""
+    """Keeps Icinga 2's hosts and services in step with the fleet."""
 
     def __init__(
         self,
         config: Icinga2Config,
-        model: FleetSource,
+        fleet: Fleet,
         expire_after: float,
         stats: PushStats | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        """Push `model` per `config`; hosts of robots not seen within `expire_after` of start are deleted."""
+        """Push `fleet` per `config`; hosts of robots not seen within `expire_after` of start are deleted."""
         self._config = config
-        self._model = model
+        self._fleet = fleet
         self._expire_after = expire_after
         self.stats = stats or PushStats()
         self._clock = clock
@@ -103,7 +95,7 @@ class Icinga2Push:
         """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off."""
         now = self._clock()
         try:
-            self._queue(self._model.snapshot(), now)
+            self._queue(self._fleet.snapshot(), now)
         except FleetPartUnavailable as error:
             # A robot missing from a partial snapshot is no robot gone: wait for the whole fleet.
             log.info("Icinga 2 push: not queueing this tick, %s", error)

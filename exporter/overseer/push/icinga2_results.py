@@ -1,8 +1,8 @@
 """What to tell Icinga 2 about one robot: its host's state and each service's check result.
 
 Each service's result is exactly what `check_ros_diagnostics` prints for the robot (and, for a group
-service, for `--name-regex '^/<Group>(/|$)'`): it is judged by the check's own report code from the
-very document the check reads, `serve/api.robot_document`.
+service, for `--name-regex '^/<Group>(/|$)'`): the same verdict (`overseer.verdict`), judged from the
+snapshot the API document is made of, its parts handed to Icinga as they are (text and perfdata items).
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from overseer.check.report import Settings, down_text, judge, robot_from_document
 from overseer.model import FleetSnapshot, RobotState
 from overseer.push.icinga2_names import (
     ROBOT_SERVICE,
@@ -19,7 +18,7 @@ from overseer.push.icinga2_names import (
     group_service_name,
     host_name,
 )
-from overseer.serve.api import robot_document
+from overseer.verdict import Component, Robot, Settings, Verdict, down_text, judge
 
 HOST_UP, HOST_DOWN = 0, 1
 
@@ -59,10 +58,9 @@ def robot_results(
     `groups` are the group services to judge: the robot's groups now and any it had before, which the
     check then judges as it would (UNKNOWN, no component matches) instead of leaving them frozen.
     """
-    document = robot_document(snapshot, robot)
-    judged = robot_from_document(document)
+    judged = judged_robot(snapshot, robot)
     host = host_name(robot.name)
-    up = bool(document["up"])
+    up = judged.up
     results = [
         CheckResult(
             host,
@@ -75,37 +73,31 @@ def robot_results(
         )
     ]
     if "robot" in kinds:
-        results.append(service_result(host, ROBOT_SERVICE, *judge(judged, Settings())))
+        results.append(service_result(host, ROBOT_SERVICE, judge(judged, Settings())))
     if "groups" in kinds:
         for group in groups:
             settings = Settings(name_regex=re.compile(group_pattern(group)))
-            results.append(service_result(host, group_service_name(group), *judge(judged, settings)))
+            results.append(service_result(host, group_service_name(group), judge(judged, settings)))
     return results
 
 
-def service_result(host: str, service: str, state: int, output: str) -> CheckResult:
-    """A check's printed output split as Icinga 2 stores it: text with long output, and perfdata items."""
-    first_line, newline, long_output = output.partition("\n")
-    text, bar, perfdata = first_line.partition(" | ")
-    return CheckResult(
-        host, service, state, text + newline + long_output, split_perfdata(perfdata) if bar else ()
-    )
+def judged_robot(snapshot: FleetSnapshot, robot: RobotState) -> Robot:
+    """The robot as the verdict reads it: what `GET /api/v1/robots/<robot>` shows of it, now."""
+    up = snapshot.robot_up(robot)
+    components = [
+        Component(
+            component.name,
+            component.hardware_id,
+            int(snapshot.component_level(robot, key, component, up)),
+            component.message,
+            list(component.values),
+        )
+        for key, component in sorted(robot.components.items())
+    ]
+    return Robot(robot.name, up, robot.last_message, snapshot.taken_at, components, robot.publisher_alive)
 
 
-def split_perfdata(text: str) -> tuple[str, ...]:
-    """Perfdata items split on spaces outside quoted labels (`'a b'=1;;;0 'c'=2`)."""
-    items: list[str] = []
-    current: list[str] = []
-    quoted = False
-    for char in text:
-        if char == "'":
-            quoted = not quoted  # a doubled quote toggles twice: still inside
-        if char == " " and not quoted:
-            if current:
-                items.append("".join(current))
-                current = []
-            continue
-        current.append(char)
-    if current:
-        items.append("".join(current))
-    return tuple(items)
+def service_result(host: str, service: str, verdict: Verdict) -> CheckResult:
+    """A verdict as Icinga 2 stores a check result: text with long output, and perfdata items."""
+    output = "\n".join([verdict.status_text, *verdict.long_output()])
+    return CheckResult(host, service, verdict.state, output, tuple(verdict.perfdata))

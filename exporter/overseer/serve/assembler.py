@@ -12,10 +12,10 @@ from prometheus_client.registry import Collector, CollectorRegistry
 
 from overseer import __version__
 from overseer.codec import compiled
-from overseer.serve import metric_families as contract
-from overseer.serve.exposition import ExpositionPart, escape_label_value, go_float
+from overseer.fleet import metric_families as contract
+from overseer.fleet.exposition import ExpositionPart, escape_label_value, go_float
+from overseer.fleet.metric_values import DROP_REASONS, message_counts
 from overseer.serve.exposition_formats import TEXT, ExpositionFormat
-from overseer.serve.metric_values import DROP_REASONS, message_counts
 
 
 class ExpositionAssembler:

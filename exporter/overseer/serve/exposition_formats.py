@@ -15,7 +15,7 @@ from prometheus_client.exposition import generate_latest as generate_text
 from prometheus_client.openmetrics.exposition import generate_latest as generate_openmetrics
 from prometheus_client.registry import Collector
 
-from overseer.serve.metric_families import MetricFamily
+from overseer.fleet.metric_families import MetricFamily
 
 TEXT_MEDIA_TYPE = "text/plain"
 OPENMETRICS_MEDIA_TYPE = "application/openmetrics-text"

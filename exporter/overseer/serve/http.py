@@ -19,15 +19,15 @@ import ssl
 import sys
 import threading
 import time
+from collections.abc import Callable, Mapping
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from overseer.history.query import QueryError, parse_event_query
-from overseer.history.store import EventStore, EventsUnavailable
-from overseer.serve.api import ComponentQueryError, parse_component_query
-from overseer.serve.fleet_view import FleetPartUnavailable, FleetView
+from overseer.fleet.interface import Fleet, FleetPartUnavailable
+from overseer.serve.api_query import ComponentQueryError, parse_component_query
+from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
@@ -39,7 +39,8 @@ log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
 COMPONENTS_PATH = "/api/v1/components"
-EVENTS_PATH = "/api/v1/events"
+# A JSON path served for another output (the event history): its answer to a GET's query string.
+JsonRoute = Callable[[str], tuple[int, dict[str, Any]]]
 MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
 REQUEST_TIMEOUT_SECONDS = 10.0
@@ -51,23 +52,29 @@ _NOT_TLS_ANSWER = (
 
 
 class OverseerServer(ThreadingHTTPServer):
-    """A threading HTTP server that serves one fleet view."""
+    """A threading HTTP server that serves one fleet, and JSON routes of other outputs beside it."""
 
     daemon_threads = True
-    events: EventStore | None = None  # the event history, when enabled
     block_on_close = False  # stopping never waits for a slow client
     request_queue_size = 64
 
     def __init__(
         self,
         address: tuple[str, int],
-        view: FleetView,
+        fleet: Fleet,
+        assembler: ExpositionAssembler,
         security: WebSecurity | None = None,
+        routes: Mapping[str, JsonRoute] | None = None,
     ) -> None:
-        """Serve `view` on `address` ('' host for every interface; IPv6 when the host has a colon)."""
+        """Serve `fleet` on `address` ('' host for every interface; IPv6 when the host has a colon).
+
+        `/metrics` is written by `assembler`; `routes` are JSON paths of other outputs (the events).
+        """
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
-        self.view = view
+        self.fleet = fleet
+        self.assembler = assembler
+        self.routes = dict(routes or {})
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -249,7 +256,7 @@ class _Handler(BaseHTTPRequestHandler):
         elif path == "/-/healthy" or path == "/-/ready":
             self._send(200, b"OK\n", "text/plain; charset=utf-8", head_only)
         elif path == ROBOTS_PATH or path == ROBOTS_PATH + "/":
-            self._json(200, self.server.view.robots_document(), head_only)
+            self._json(200, self.server.fleet.robots_document(), head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
         elif path == COMPONENTS_PATH:
@@ -259,8 +266,9 @@ class _Handler(BaseHTTPRequestHandler):
             self._send(
                 200, page_file.body, page_file.content_type, head_only, compressible=True, extra=PAGE_HEADERS
             )
-        elif path == EVENTS_PATH:
-            self._events(urlsplit(self.path).query, head_only)
+        elif path in self.server.routes:
+            status, document = self.server.routes[path](urlsplit(self.path).query)
+            self._json(status, document, head_only)
         elif path in ("/", "/index.html"):
             self._send(
                 200, self.server.status_page, "text/html; charset=utf-8", head_only, extra=PAGE_HEADERS
@@ -269,7 +277,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._json(404, {"error": f"no such path {path!r}"}, head_only)
 
     def _robot(self, name: str, head_only: bool) -> None:
-        document = self.server.view.robot_document(name)
+        document = self.server.fleet.robot_document(name)
         if document is None:
             self._json(404, {"error": f"unknown robot {name!r}"}, head_only)
         else:
@@ -281,25 +289,12 @@ class _Handler(BaseHTTPRequestHandler):
         except ComponentQueryError as error:
             self._json(400, {"error": str(error)}, head_only)
             return
-        self._json(200, self.server.view.components_document(query), head_only)
-
-    def _events(self, query_string: str, head_only: bool) -> None:
-        store = self.server.events
-        if store is None:
-            self._json(404, {"error": "the event history is disabled (events.enabled: false)"}, head_only)
-            return
-        try:
-            events, cursor = store.query(parse_event_query(query_string))
-        except QueryError as error:
-            self._json(400, {"error": str(error)}, head_only)
-        except EventsUnavailable as error:
-            self._json(503, {"error": f"the event history is unavailable: {error}"}, head_only)
-        else:
-            self._json(200, {"events": events, "next": cursor}, head_only)
+        self._json(200, self.server.fleet.components_document(query), head_only)
 
     def _metrics(self, head_only: bool) -> None:
         fmt = negotiate_format(self.headers.get("Accept"))
-        self._send(200, self.server.view.metrics(fmt), fmt.content_type, head_only, compressible=True)
+        body = self.server.assembler.assemble(self.server.fleet.exposition_parts(), fmt)
+        self._send(200, body, fmt.content_type, head_only, compressible=True)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:
         body = json.dumps(document, ensure_ascii=False, allow_nan=False).encode("utf-8")

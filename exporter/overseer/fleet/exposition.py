@@ -20,10 +20,10 @@ from typing import cast
 
 from prometheus_client.utils import floatToGoString
 
+from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
+from overseer.fleet.metric_values import NumericValues
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
-from overseer.serve.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
-from overseer.serve.metric_values import NumericValues
 
 # prometheus-client's number format (Go's), so values render exactly as its families' do.
 go_float = cast(Callable[[float], str], floatToGoString)
@@ -144,9 +144,9 @@ def _lines_for(
     else:
         components = robot.components
         other_updates = sorted(components[key].last_update for key in robot.missing)
-    horizon = snapshot.taken_at - snapshot.limits.stale_after
     message_stale = not snapshot.fresh(robot.last_message)
-    signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, horizon))
+    # How many components missing from the latest message are stale now: a change renders them again.
+    signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, snapshot.stale_before))
     if cached is not None and cached.signature == signature:
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the

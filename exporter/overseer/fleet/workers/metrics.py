@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-from overseer.workers.pool import WorkerPool
+from overseer.fleet.workers.pool import WorkerPool
 
 
 class WorkerPoolCollector(Collector):

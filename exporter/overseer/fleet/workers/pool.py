@@ -17,9 +17,9 @@ from multiprocessing.process import BaseProcess
 from typing import Any, NamedTuple
 
 from overseer.config import Config
-from overseer.history.events import Event
-from overseer.serve.fleet_view import FleetPartUnavailable
-from overseer.workers.process import FAILED, READY, run_worker
+from overseer.fleet.interface import FleetPartUnavailable
+from overseer.fleet.workers.process import FAILED, READY, run_worker
+from overseer.model.events import Event
 
 log = logging.getLogger(__name__)
 

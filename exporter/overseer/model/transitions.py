@@ -15,14 +15,14 @@ or `expired` when the model forgets it (only such components expire while their 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-from overseer.history.events import Event
 from overseer.levels import Level, worst
-from overseer.model import Component, ComponentKey, FleetLimits, FleetSnapshot, LevelChange, RobotState
-
-EventSink = Callable[[list[Event]], None]
+from overseer.model.events import Event, EventSink
+from overseer.model.fleet import LevelChange
+from overseer.model.snapshot import FleetSnapshot
+from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
 
 
 @dataclass(slots=True)
@@ -76,12 +76,11 @@ class TransitionDetector:
         """Compare `snapshot` with the last one checked and send the transitions time brought."""
         events: list[Event] = []
         seen = self._seen
-        taken_at, timeout = snapshot.taken_at, self._limits.robot_timeout
+        taken_at = snapshot.taken_at
+        robot_up = snapshot.robot_up
         for robot in snapshot.robots:
             before = seen.get(robot.name)
-            last = robot.last_message
-            # as snapshot.robot_up, inlined
-            up = robot.publisher_alive and last is not None and taken_at - last <= timeout
+            up = robot_up(robot)
             if before is None:
                 before = seen[robot.name] = _Seen(False, False, _NONE, {}, _NONE)
             elif up is before.up and not robot.missing and not before.missing:
@@ -113,9 +112,7 @@ class TransitionDetector:
             left = not robot.publisher_alive  # the transport saw its publisher go: down now, not later
             events.append(
                 Event(
-                    min(snapshot.taken_at, last + limits.robot_timeout)
-                    if left
-                    else last + limits.robot_timeout,
+                    snapshot.went_down_at(robot),
                     name,
                     "robot_down",
                     old_level=_reported_worst(robot.components),  # unchanged since it went silent
@@ -203,7 +200,7 @@ class TransitionDetector:
                 stale.add(key)
                 events.append(
                     Event(
-                        updated + limits.stale_after,
+                        snapshot.went_stale_at(updated),
                         name,
                         "level",
                         key[0],

@@ -8,10 +8,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
+from overseer.fleet.exposition import ExpositionPart
+from overseer.fleet.metric_families import FLEET_FAMILIES
 from overseer.levels import Level, severity_rank
 from overseer.model import FleetLimits, FleetSnapshot, RobotState
-from overseer.serve.exposition import ExpositionPart
-from overseer.serve.metric_families import FLEET_FAMILIES
 
 
 def merge_robots_documents(documents: Sequence[dict[str, Any]], generated_at: float) -> dict[str, Any]:

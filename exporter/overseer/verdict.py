@@ -1,7 +1,9 @@
-"""Judge a robot's components the Nagios way and write the plugin output; pure functions, no I/O.
+"""The Nagios verdict on one robot, as data: its state, its summary, its per-level lists, its perfdata.
 
-Only the standard library's cheapest modules are used here: `check_ros_diagnostics` starts once
-per check, and its start-up time is most of its run time.
+`judge` decides; `plugin_output` writes what a Nagios plugin prints (the check's stdout), and the Icinga 2
+push hands the same verdict's parts to Icinga as they are, so every path says the same thing. Only the
+standard library's cheapest modules are used here: `check_ros_diagnostics` starts once per check, and its
+start-up time is most of its run time.
 """
 
 from __future__ import annotations
@@ -21,10 +23,6 @@ _COUNT_LABELS = (("error", 2), ("warn", 1), ("stale", 3), ("ok", 0))
 _SUMMARY_COMPONENTS = 3
 _SUMMARY_MESSAGE_CHARS = 60
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"  # compiled on first use, by re's cache
-
-
-class CheckError(Exception):
-    """A failure that ends the check in UNKNOWN; its text is the status line's."""
 
 
 class Component:
@@ -87,77 +85,6 @@ class Settings:
         self.verbosity = verbosity
 
 
-def robot_from_document(document: object) -> Robot:
-    """The robot in a `GET /api/v1/robots/<robot>` answer; CheckError naming what is wrong with it."""
-    if not isinstance(document, dict):
-        raise CheckError("the answer is not a JSON object")
-    last_message = document.get("last_message")
-    return Robot(
-        name=text_field(document, "robot"),
-        up=flag_field(document, "up"),
-        last_message=None if last_message is None else number_field(document, "last_message"),
-        generated_at=number_field(document, "generated_at"),
-        components=[component_from_document(item) for item in list_field(document, "components")],
-        # Absent from exporters before Zenoh liveliness: their robots' publishers count as alive.
-        publisher_alive="publisher_alive" not in document or flag_field(document, "publisher_alive"),
-    )
-
-
-def component_from_document(document: object) -> Component:
-    """One entry of the answer's `components`; CheckError when its fields are missing or mistyped."""
-    if not isinstance(document, dict):
-        raise CheckError("a component is not a JSON object")
-    level = document.get("level")
-    if level not in (0, 1, 2, 3) or not isinstance(level, int) or isinstance(level, bool):
-        raise CheckError(f"component level {level!r} is not 0, 1, 2 or 3")
-    return Component(
-        name=text_field(document, "name"),
-        hardware_id=text_field(document, "hardware_id"),
-        level=level,
-        message=text_field(document, "message"),
-        values=[key_value(item) for item in list_field(document, "values")],
-    )
-
-
-def key_value(document: object) -> tuple[str, str]:
-    """One `{"key": ..., "value": ...}` entry of a component's values."""
-    if not isinstance(document, dict):
-        raise CheckError("a key-value is not a JSON object")
-    return text_field(document, "key"), text_field(document, "value")
-
-
-def text_field(document: dict[str, object], key: str) -> str:
-    """`document[key]` when it is a JSON string; CheckError otherwise."""
-    value = document.get(key)
-    if not isinstance(value, str):
-        raise CheckError(f"{key!r} is missing or not a JSON string")
-    return value
-
-
-def flag_field(document: dict[str, object], key: str) -> bool:
-    """`document[key]` when it is a JSON boolean; CheckError otherwise."""
-    value = document.get(key)
-    if not isinstance(value, bool):
-        raise CheckError(f"{key!r} is missing or not a JSON boolean")
-    return value
-
-
-def list_field(document: dict[str, object], key: str) -> list[object]:
-    """`document[key]` when it is a JSON array; CheckError otherwise."""
-    value = document.get(key)
-    if not isinstance(value, list):
-        raise CheckError(f"{key!r} is missing or not a JSON array")
-    return value
-
-
-def number_field(document: dict[str, object], key: str) -> float:
-    """`document[key]` when it is a JSON number; CheckError otherwise."""
-    value = document.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CheckError(f"{key!r} is missing or not a JSON number")
-    return value
-
-
 def worst_state(states: list[int]) -> int:
     """The most severe Nagios state by CRITICAL > WARNING > UNKNOWN > OK; OK when empty."""
     return max(states, key=_SEVERITY_RANK.__getitem__, default=OK)
@@ -179,24 +106,67 @@ def select(components: list[Component], settings: Settings) -> list[Component]:
     ]
 
 
-def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
-    """The exit state and the full plugin output (status line, long output) for `robot`."""
+class Verdict:
+    """What the check finds of one robot: a Nagios state, one line saying why, the components by section.
+
+    `summary` is the status line after `STATE - `; `sections` hold the paper's sensor lists in order
+    (CRITICAL, WARNING, stale, OK), each a title and its components, only those with any; `perfdata`
+    the performance data items.
+    """
+
+    __slots__ = ("perfdata", "sections", "state", "summary")
+
+    def __init__(
+        self,
+        state: int,
+        summary: str,
+        sections: list[tuple[str, list[Component]]],
+        perfdata: list[str],
+    ) -> None:
+        """Keep the fields."""
+        self.state = state
+        self.summary = summary
+        self.sections = sections
+        self.perfdata = perfdata
+
+    @property
+    def status_text(self) -> str:
+        """The status line without its performance data: `CRITICAL - robot3: ...`."""
+        return f"{STATE_NAMES[self.state]} - {self.summary}"
+
+    def long_output(self, verbosity: int = 0) -> list[str]:
+        """The lines after the status line: each section's title, then its components."""
+        lines = []
+        for title, members in self.sections:
+            lines.append(title)
+            lines.extend(component_line(component, verbosity) for component in members)
+        return lines
+
+
+def judge(robot: Robot, settings: Settings) -> Verdict:
+    """The verdict on `robot`: its components chosen by `settings` and judged the Nagios way."""
     name = clean(robot.name)
     if not robot.up:
-        return (
-            settings.stale_state,
-            f"{STATE_NAMES[settings.stale_state]} - {name} is down: {down_text(robot)}",
-        )
+        return Verdict(settings.stale_state, f"{name} is down: {down_text(robot)}", [], [])
     components = sorted(select(robot.components, settings), key=lambda c: (c.name, c.hardware_id))
     if not components:
-        return UNKNOWN, f"UNKNOWN - {name}: {clean(no_match_text(robot, settings))}"
+        return Verdict(UNKNOWN, f"{name}: {clean(no_match_text(robot, settings))}", [], [])
     states = [state_of(component, settings.stale_state) for component in components]
     state = worst_state(states)
-    first_line = (
-        f"{STATE_NAMES[state]} - {name}: {summary(components, states, state)}"
-        f" | {perfdata(components, settings.perfdata_values)}"
+    return Verdict(
+        state,
+        f"{name}: {summary(components, states, state)}",
+        sections(components, states, settings.stale_state),
+        perfdata(components, settings.perfdata_values),
     )
-    return state, "\n".join([first_line, *long_output(components, states, settings)])
+
+
+def plugin_output(verdict: Verdict, verbosity: int = 0) -> str:
+    """What a Nagios plugin prints: the status line with its perfdata after ` | `, then the long output."""
+    first_line = verdict.status_text
+    if verdict.perfdata:
+        first_line += " | " + " ".join(verdict.perfdata)
+    return "\n".join([first_line, *verdict.long_output(verbosity)])
 
 
 def down_text(robot: Robot) -> str:
@@ -259,23 +229,20 @@ def short_message(component: Component) -> str:
     return message or "no message"
 
 
-def long_output(components: list[Component], states: list[int], settings: Settings) -> list[str]:
-    """The paper's sensor lists: CRITICAL, WARNING, stale, OK sections, each component with its message."""
-    headers = (
+def sections(
+    components: list[Component], states: list[int], stale_state: int
+) -> list[tuple[str, list[Component]]]:
+    """The paper's sensor lists (CRITICAL, WARNING, stale, OK), each with its components; no empty one."""
+    titles = (
         "CRITICAL sensor(s) list:",
         "WARNING sensor(s) list:",
-        f"{STATE_NAMES[settings.stale_state]} (stale) sensor(s) list:",
+        f"{STATE_NAMES[stale_state]} (stale) sensor(s) list:",
         "OK sensor(s) list:",
     )
-    sections: list[list[str]] = [[] for _ in headers]
+    members: list[list[Component]] = [[] for _ in titles]
     for component, state in zip(components, states, strict=True):
-        sections[section_of(component, state)].append(component_line(component, settings.verbosity))
-    lines = []
-    for header, members in zip(headers, sections, strict=True):
-        if members:
-            lines.append(header)
-            lines.extend(members)
-    return lines
+        members[section_of(component, state)].append(component)
+    return [(title, listed) for title, listed in zip(titles, members, strict=True) if listed]
 
 
 def section_of(component: Component, state: int) -> int:
@@ -299,13 +266,13 @@ def clean(text: str) -> str:
     return " ".join(text.replace("|", "¦").split())
 
 
-def perfdata(components: list[Component], with_values: bool) -> str:
-    """Counts per level, then (when asked) every numeric key-value, in Nagios perfdata syntax."""
+def perfdata(components: list[Component], with_values: bool) -> list[str]:
+    """Counts per level, then (when asked) every numeric key-value, as Nagios perfdata items."""
     levels = [component.level for component in components]
-    counts = [f"'{label}'={levels.count(level)};;;0" for label, level in _COUNT_LABELS]
+    items = [f"'{label}'={levels.count(level)};;;0" for label, level in _COUNT_LABELS]
     if with_values:
-        counts.extend(value_perfdata(components))
-    return " ".join(counts)
+        items.extend(value_perfdata(components))
+    return items
 
 
 def value_perfdata(components: list[Component]) -> list[str]:

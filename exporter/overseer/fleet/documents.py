@@ -1,9 +1,8 @@
-"""The /api/v1 view: fleet snapshots as JSON-ready dictionaries."""
+"""The fleet as the JSON API shows it: robots, one robot, components matching a query, from a snapshot."""
 
 from __future__ import annotations
 
 import heapq
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -69,12 +68,6 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
 
 COMPONENTS_DEFAULT_LIMIT = 100
 COMPONENTS_MAX_LIMIT = 1000
-QUERY_MAX_LENGTH = 256
-_LEVEL_NAMES = ", ".join(level.name for level in Level)
-
-
-class ComponentQueryError(ValueError):
-    """A query parameter the API cannot honour; the message names the parameter and its value."""
 
 
 @dataclass(frozen=True)
@@ -85,34 +78,6 @@ class ComponentQuery:
     text: str = ""
     robot: str | None = None
     limit: int = COMPONENTS_DEFAULT_LIMIT
-
-
-def parse_component_query(params: Mapping[str, Sequence[str]]) -> ComponentQuery:
-    """The query of GET /api/v1/components from its parameters (as `urllib.parse.parse_qs` gives them)."""
-    levels: set[Level] | None = None
-    for value in params.get("level", ()):
-        for word in value.split(","):
-            word = word.strip()
-            if not word:
-                continue
-            level = _level_named(word)
-            if level is None:
-                raise ComponentQueryError(f"level: expected {_LEVEL_NAMES} or 0-3, got {word!r}")
-            levels = (levels or set()) | {level}
-    text = _last(params, "q") or ""
-    if len(text) > QUERY_MAX_LENGTH:
-        raise ComponentQueryError(f"q: longer than {QUERY_MAX_LENGTH} characters ({len(text)})")
-    limit_text = _last(params, "limit")
-    limit = COMPONENTS_DEFAULT_LIMIT
-    if limit_text is not None:
-        if not limit_text.isdigit() or not 1 <= int(limit_text) <= COMPONENTS_MAX_LIMIT:
-            raise ComponentQueryError(
-                f"limit: expected a whole number from 1 to {COMPONENTS_MAX_LIMIT}, got {limit_text!r}"
-            )
-        limit = int(limit_text)
-    return ComponentQuery(
-        None if levels is None else frozenset(levels), text, _last(params, "robot") or None, limit
-    )
 
 
 def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[str, Any]:
@@ -168,14 +133,3 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
         ],
         "robots": [{"robot": name, "matches": count} for name, count in sorted(per_robot.items())],
     }
-
-
-def _level_named(word: str) -> Level | None:
-    if word.isdigit():
-        return Level(int(word)) if int(word) in Level._value2member_map_ else None
-    return Level.__members__.get(word.upper())
-
-
-def _last(params: Mapping[str, Sequence[str]], name: str) -> str | None:
-    values = params.get(name)
-    return values[-1] if values else None

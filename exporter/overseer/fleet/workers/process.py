@@ -10,21 +10,16 @@ import logging
 import queue
 import signal
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
 from overseer.config import Config
-from overseer.history.events import Event
-from overseer.history.service import TransitionWatch
+from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.local import LocalFleet
+from overseer.fleet.workers.merge import portable_robots
 from overseer.log_format import configure_logging
-from overseer.model import FleetModel
-from overseer.model.expiry import start_expiry
-from overseer.serve.api import ComponentQuery, components_document, robot_document, robots_document
-from overseer.serve.exposition import FleetExposition
-from overseer.serve.fleet_view import model_exposition
-from overseer.sources import Source, build_sources
-from overseer.workers.merge import portable_robots
+from overseer.model.events import Event
 
 log = logging.getLogger(__name__)
 
@@ -43,31 +38,22 @@ def worker_config(config: Config, worker: int, workers: int) -> Config:
     )
 
 
-@dataclass
-class _Worker:
-    """The running parts of a worker."""
-
-    model: FleetModel
-    sources: list[Source]
-    exposition: FleetExposition
-    watch: TransitionWatch | None
-
-    def answer(self, kind: str, argument: Any) -> Any:
-        """The answer to one request from the exporter."""
-        if kind == "part":
-            return self.exposition.render_part()
-        snapshot = self.model.snapshot()
-        if kind == "robots":
-            return robots_document(snapshot)
-        if kind == "robot":
-            robot = snapshot.find(argument)
-            return None if robot is None else robot_document(snapshot, robot)
-        if kind == "components":
-            assert isinstance(argument, ComponentQuery)
-            return components_document(snapshot, argument)
-        if kind == "snapshot":
-            return replace(snapshot, robots=tuple(portable_robots(snapshot)))
-        raise ValueError(f"unknown request {kind!r}")
+def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
+    """The answer of a worker's fleet to one request from the exporter (one of `PooledFleet`'s)."""
+    if kind == "part":
+        [part] = fleet.exposition_parts()
+        return part
+    if kind == "robots":
+        return fleet.robots_document()
+    if kind == "robot":
+        return fleet.robot_document(argument)
+    if kind == "components":
+        assert isinstance(argument, ComponentQuery)
+        return fleet.components_document(argument)
+    if kind == "snapshot":
+        snapshot = fleet.snapshot()
+        return replace(snapshot, robots=tuple(portable_robots(snapshot)))
+    raise ValueError(f"unknown request {kind!r}")
 
 
 def run_worker(config: Config, worker: int, workers: int, requests: Connection, events: Connection) -> None:
@@ -79,20 +65,20 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
     configure_logging(config.log_level, config.log_format, worker)
     config = worker_config(config, worker, workers)
     try:
-        running = _start(config, events)
+        fleet = LocalFleet.build(config, _EventSender(events).send if config.events.enabled else None)
+        fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)
         requests.send((FAILED, f"{type(error).__name__}: {error}"))
         return
     requests.send((READY, None))
-    start_expiry(running.model, threading.Event())
     while True:
         try:
             kind, argument = requests.recv()
         except (EOFError, OSError):
             break  # the exporter is gone or stopping
         try:
-            reply: tuple[str, Any] = ("ok", running.answer(kind, argument))
+            reply: tuple[str, Any] = ("ok", answer(fleet, kind, argument))
         except Exception as error:
             log.exception("ingest worker %d failed to answer %s", worker, kind)
             reply = ("error", f"{type(error).__name__}: {error}")
@@ -100,20 +86,7 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
             requests.send(reply)
         except (BrokenPipeError, OSError):
             break
-    for source in running.sources:
-        source.stop()
-
-
-def _start(config: Config, events: Connection) -> _Worker:
-    model = FleetModel(config.fleet)
-    sources = build_sources(config, model)
-    exposition = model_exposition(model, config)
-    watch = TransitionWatch(model, _EventSender(events).send) if config.events.enabled else None
-    if watch is not None:
-        watch.start()  # before the transports, so that it sees their first messages
-    for source in sources:
-        source.start()
-    return _Worker(model, sources, exposition, watch)
+    fleet.stop()
 
 
 class _EventSender:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -46,3 +47,7 @@ class Event:
             "message": self.message,
             "values": [{"key": key, "value": value} for key, value in self.values],
         }
+
+
+# Where transitions go, a batch at a time: the event store, or a worker's pipe to it.
+EventSink = Callable[[list[Event]], None]

@@ -1,4 +1,7 @@
-"""The check's judging and output, as pure functions: no exporter, no network."""
+"""The verdict on a robot (what the check and the Icinga 2 push say) and the check's reading of the API.
+
+Pure functions: no exporter, no network.
+"""
 
 from __future__ import annotations
 
@@ -6,25 +9,31 @@ import re
 
 import pytest
 
-from overseer.check.report import (
+from overseer.check.document import CheckError, robot_from_document
+from overseer.verdict import (
     CRITICAL,
     OK,
     UNKNOWN,
     WARNING,
-    CheckError,
     Component,
     Robot,
     Settings,
-    judge,
     parse_number,
     perf_label,
     perf_number,
     perfdata,
-    robot_from_document,
+    plugin_output,
     state_of,
     summary,
     worst_state,
 )
+from overseer.verdict import judge as judge_verdict
+
+
+def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
+    """The exit state and what the check prints for `robot`."""
+    verdict = judge_verdict(robot, settings)
+    return verdict.state, plugin_output(verdict, settings.verbosity)
 
 
 def component(
@@ -193,10 +202,40 @@ def test_perfdata_values_adds_numeric_key_values_only() -> None:
     battery = component(
         "/Power/Robot Battery", 0, "OK", "power1", voltage="12.70", state="charging", nan="nan"
     )
-    assert perfdata([battery], with_values=True) == (
-        "'error'=0;;;0 'warn'=0;;;0 'stale'=0;;;0 'ok'=1;;;0 '/Power/Robot Battery[power1]:voltage'=12.7;;;;"
+    assert perfdata([battery], with_values=True) == [
+        "'error'=0;;;0",
+        "'warn'=0;;;0",
+        "'stale'=0;;;0",
+        "'ok'=1;;;0",
+        "'/Power/Robot Battery[power1]:voltage'=12.7;;;;",
+    ]
+    assert len(perfdata([battery], with_values=False)) == 4
+
+
+def test_the_verdict_is_data_its_sections_and_perfdata_items_whole() -> None:
+    components = [
+        component("/Laser/Laser2", 2, "No scans received", "laser2"),
+        component("/Power/Robot Battery", 1, "Low", "it's one", voltage="11.2"),
+        component("/Temp", 3, "old"),
+        component("/Motor", 0, "OK"),
+    ]
+    verdict = judge_verdict(robot(*components), Settings(perfdata_values=True))
+    assert verdict.state == CRITICAL
+    assert (
+        verdict.status_text
+        == "CRITICAL - robot1: /Laser/Laser2 (No scans received) (also 1 WARNING, 1 UNKNOWN)"
     )
-    assert perfdata([battery], with_values=False).count("=") == 4
+    assert [(title, [c.name for c in members]) for title, members in verdict.sections] == [
+        ("CRITICAL sensor(s) list:", ["/Laser/Laser2"]),
+        ("WARNING sensor(s) list:", ["/Power/Robot Battery"]),
+        ("UNKNOWN (stale) sensor(s) list:", ["/Temp"]),
+        ("OK sensor(s) list:", ["/Motor"]),
+    ]
+    # Items keep the spaces and doubled quotes of their labels: the push hands them to Icinga as they are.
+    assert verdict.perfdata[-1] == "'/Power/Robot Battery[it''s one]:voltage'=11.2;;;;"
+    assert plugin_output(verdict).splitlines()[0] == verdict.status_text + " | " + " ".join(verdict.perfdata)
+    down = judge_verdict(robot(*components, up=False), Settings())
+    assert (down.state, down.sections, down.perfdata) == (UNKNOWN, [], [])
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,56 @@
+"""The one interface every output reads the fleet through, however many processes hold it.
+
+`LocalFleet` is a fleet model in this process; `PooledFleet` is a pool of ingest workers, each holding
+the robots it follows. Outputs (the HTTP endpoint, the Icinga 2 push, the event history) are written
+once against this interface and never know which one they read.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from prometheus_client.registry import Collector
+
+from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.exposition import ExpositionPart
+from overseer.model import FleetSnapshot
+
+
+class FleetPartUnavailable(RuntimeError):
+    """Part of the fleet cannot be read now (an ingest worker is restarting): the endpoint answers 503."""
+
+
+class Fleet(Protocol):
+    """What outputs need of the fleet: snapshots, rendered series with counters, API documents."""
+
+    def start(self) -> None:
+        """Begin following robots; an error when a part cannot start."""
+        ...
+
+    def stop(self) -> None:
+        """Stop following robots and release everything."""
+        ...
+
+    def snapshot(self) -> FleetSnapshot:
+        """The whole fleet now; `FleetPartUnavailable` rather than a fleet missing a part."""
+        ...
+
+    def exposition_parts(self) -> list[ExpositionPart]:
+        """Every model's rendered series and counters, for an assembler to write out in a format."""
+        ...
+
+    def robots_document(self) -> dict[str, Any]:
+        """GET /api/v1/robots."""
+        ...
+
+    def robot_document(self, name: str) -> dict[str, Any] | None:
+        """GET /api/v1/robots/<name>, or None for a robot nobody follows; `FleetPartUnavailable` meanwhile."""
+        ...
+
+    def components_document(self, query: ComponentQuery) -> dict[str, Any]:
+        """GET /api/v1/components."""
+        ...
+
+    def collectors(self) -> list[Collector]:
+        """The fleet's own metrics beyond the series (how its workers fare), appended to /metrics."""
+        ...

@@ -1,0 +1,131 @@
+"""The fleet held by one model in this process: the exporter's own with one ingest worker, or a worker's.
+
+`LocalFleet` is the one builder of "model + sources + level listener + expiry + renderer": the exporter
+builds one when it ingests itself, and every ingest worker builds one for the robots it follows.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any
+
+from prometheus_client.registry import Collector
+
+from overseer.config import Config
+from overseer.fleet.documents import ComponentQuery, components_document, robot_document, robots_document
+from overseer.fleet.exposition import ExpositionPart, FleetExposition
+from overseer.fleet.message_labels import MessageLabels
+from overseer.model import FleetModel, FleetSnapshot
+from overseer.model.events import EventSink
+from overseer.model.expiry import start_expiry
+from overseer.model.transitions import TransitionDetector
+from overseer.sources import Source, build_sources
+
+log = logging.getLogger(__name__)
+
+CHECK_INTERVAL_SECONDS = 1.0
+
+
+class LocalFleet:
+    """A fleet model, the transports that feed it, the watch of its transitions and its renderer."""
+
+    def __init__(
+        self,
+        model: FleetModel,
+        sources: list[Source],
+        exposition: FleetExposition,
+        events: EventSink | None = None,
+    ) -> None:
+        """Serve `model`, fed by `sources`, rendered by `exposition`; `events` receives its transitions."""
+        self.model = model
+        self.sources = sources
+        self.exposition = exposition
+        self._watch = None if events is None else TransitionWatch(model, events)
+        self._stopping = threading.Event()
+
+    @classmethod
+    def build(cls, config: Config, events: EventSink | None = None) -> LocalFleet:
+        """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
+
+        `events`, when given, receives the model's transitions (level changes as they are applied, and
+        what time decides, checked every second).
+        """
+        model = FleetModel(config.fleet)
+        metrics = config.metrics
+        messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
+        exposition = FleetExposition(model, metrics.value_key_pattern, messages=messages)
+        return cls(model, build_sources(config, model), exposition, events)
+
+    def start(self) -> None:
+        """Watch transitions, start the transports, and forget silent robots from now on."""
+        if self._watch is not None:
+            self._watch.start()  # before the transports, so that it sees their first messages
+        for source in self.sources:
+            source.start()
+        start_expiry(self.model, self._stopping)
+
+    def stop(self) -> None:
+        """Leave the transports and stop the timers."""
+        self._stopping.set()
+        for source in self.sources:
+            source.stop()
+        if self._watch is not None:
+            self._watch.stop()
+
+    def snapshot(self) -> FleetSnapshot:
+        """The model now."""
+        return self.model.snapshot()
+
+    def exposition_parts(self) -> list[ExpositionPart]:
+        """The model's rendered series and counters."""
+        return [self.exposition.render_part()]
+
+    def robots_document(self) -> dict[str, Any]:
+        """Every robot's summary."""
+        return robots_document(self.model.snapshot())
+
+    def robot_document(self, name: str) -> dict[str, Any] | None:
+        """One robot with every component, or None."""
+        snapshot = self.model.snapshot()
+        robot = snapshot.find(name)
+        return None if robot is None else robot_document(snapshot, robot)
+
+    def components_document(self, query: ComponentQuery) -> dict[str, Any]:
+        """The components matching `query`."""
+        return components_document(self.model.snapshot(), query)
+
+    def collectors(self) -> list[Collector]:
+        """None: one model in this process has no metrics of its own beyond its series."""
+        return []
+
+
+class TransitionWatch:
+    """Detects a model's transitions while started: its level listener, and a check every second."""
+
+    def __init__(self, model: FleetModel, sink: EventSink) -> None:
+        """Watch `model`, sending its events to `sink`."""
+        self.detector = TransitionDetector(model.limits, sink)
+        self._model = model
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        """Listen to the model, and check its snapshots every `CHECK_INTERVAL_SECONDS`."""
+        self._model.set_level_listener(self.detector.on_level_changes)
+        self._thread = threading.Thread(target=self._check_loop, name="event-detector", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop detecting."""
+        self._stopping.set()
+        self._model.set_level_listener(None)
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    def _check_loop(self) -> None:
+        while not self._stopping.wait(CHECK_INTERVAL_SECONDS):
+            try:
+                self.detector.check(self._model.snapshot())
+            except Exception:  # a bug here must not end event detection for good
+                log.exception("event detection failed")

@@ -1,0 +1,108 @@
+"""The fleet held by a pool of ingest workers, served as one: snapshots, series, documents.
+
+Each worker follows its own robots (`workers/`); every answer here is joined from the workers' answers
+(`workers/merge.py`), so the outputs read one fleet, each robot exactly once and counters added up.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import Any
+
+from prometheus_client.registry import Collector
+
+from overseer.config import Config
+from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.exposition import ExpositionPart
+from overseer.fleet.workers.merge import (
+    CounterCarry,
+    counters_part,
+    merge_components_documents,
+    merge_robots_documents,
+    merge_snapshots,
+    part_counters,
+)
+from overseer.fleet.workers.metrics import WorkerPoolCollector
+from overseer.fleet.workers.pool import WorkerPool, WorkersUnavailable
+from overseer.model import FleetSnapshot
+from overseer.model.events import EventSink
+
+SNAPSHOT_REUSE_SECONDS = 1.0
+
+
+class PooledFleet:
+    """`config.ingest.workers` workers asked together (or the one owning a robot), their answers joined.
+
+    `events`, when given, receives every worker's transitions.
+    """
+
+    def __init__(self, config: Config, events: EventSink | None = None) -> None:
+        """Prepare the pool; no worker runs until `start`."""
+        self.pool = WorkerPool(config, events)
+        self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
+        self._counters = CounterCarry(self.pool.count)
+        self._last_snapshot: FleetSnapshot | None = None
+
+    def start(self) -> None:
+        """Start every worker; `WorkerStartError` (and nothing left running) when one cannot start."""
+        try:
+            self.pool.start()
+        except Exception:
+            self.pool.stop()
+            raise
+
+    def prepare_stop(self) -> None:
+        """Restart no worker from now on: the exporter is stopping (and may see its workers end first)."""
+        self.pool.prepare_stop()
+
+    def stop(self) -> None:
+        """Stop every worker."""
+        self.pool.stop()
+
+    def snapshot(self) -> FleetSnapshot:
+        """One snapshot of the whole fleet, at most `SNAPSHOT_REUSE_SECONDS` old.
+
+        `WorkersUnavailable` when a worker cannot answer: a snapshot without its robots would tell the
+        Icinga 2 push that they are gone, and it would delete their hosts.
+        """
+        last = self._last_snapshot
+        if last is not None and time.time() - last.taken_at < SNAPSHOT_REUSE_SECONDS:
+            return last
+        answers = self.pool.ask_every("snapshot")
+        self._last_snapshot = merge_snapshots([a.value for a in answers], self.pool.config.fleet, time.time())
+        return self._last_snapshot
+
+    def exposition_parts(self) -> list[ExpositionPart]:
+        """Every worker's series, and the counters added up, never going back when a worker restarts."""
+        answers = self.pool.ask_all("part")
+        totals = self._counters.totals((a.worker, a.generation, part_counters(a.value)) for a in answers)
+        return [*(_without_counters(answer.value) for answer in answers), counters_part(totals)]
+
+    def robots_document(self) -> dict[str, Any]:
+        """Every worker's robots, by name."""
+        return merge_robots_documents([a.value for a in self.pool.ask_all("robots")], time.time())
+
+    def robot_document(self, name: str) -> dict[str, Any] | None:
+        """The robot from the one worker that follows it, or None."""
+        for index, owner in enumerate(self._owners):
+            if owner.owns(name):
+                answer = self.pool.ask(index, "robot", name)
+                if answer is None:
+                    raise WorkersUnavailable(f"ingest worker {index}, which follows {name!r}, did not answer")
+                return answer[0]  # type: ignore[no-any-return]
+        return None
+
+    def components_document(self, query: ComponentQuery) -> dict[str, Any]:
+        """The fleet's first matches among every worker's first matches."""
+        return merge_components_documents(
+            [a.value for a in self.pool.ask_all("components", query)], query.limit, time.time()
+        )
+
+    def collectors(self) -> list[Collector]:
+        """How the workers fare: how many, which are up, how often each was restarted."""
+        return [WorkerPoolCollector(self.pool)]
+
+
+def _without_counters(part: ExpositionPart) -> ExpositionPart:
+    return replace(part, message_counts={}, dropped_statuses={}, truncated_strings=0, source_errors={})

@@ -1,0 +1,5 @@
+"""Ingest workers: processes that each follow their own robots, joined into one fleet by `PooledFleet`.
+
+`process` is what runs in a worker (a `LocalFleet` of its robots, answering the exporter's requests);
+`pool` starts, asks and restarts them; `merge` joins their answers; `metrics` tells how the workers fare.
+"""
