@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 PYTEST_ARGS ?=
 
-.PHONY: setup system-deps demo test lint bench clean
+.PHONY: setup system-deps demo test test-quick lint bench clean
 
 setup: $(VENV)/.installed
 
@@ -33,6 +33,10 @@ lint: setup system-deps
 
 test: setup system-deps lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+# The unit and property tests: no server, no middleware, no browser (a couple of minutes).
+test-quick: setup
+	$(BIN)/python -m pytest -m "not servers" $(PYTEST_ARGS)
 
 bench: setup system-deps
 	$(BIN)/python -m bench

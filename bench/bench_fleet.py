@@ -18,12 +18,8 @@ import urllib.request
 from pathlib import Path
 
 from bench.common import Row, emit, tree_cpu_seconds, tree_resident_bytes
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.ports import free_port, fresh_domain_id  # noqa: E402 - the test harness lives in tests/
-from support.processes import running_exporter  # noqa: E402
+from testbed.ports import free_port, fresh_domain_id
+from testbed.processes import running_exporter
 
 
 def received(url: str) -> float:

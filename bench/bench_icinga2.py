@@ -21,23 +21,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from bench.common import Row, emit
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from overseer.app import Exporter  # noqa: E402
-from overseer.config import load_config  # noqa: E402
-from overseer.messages import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from support.icinga2 import Icinga2, push_api_user, push_config, running_icinga2  # noqa: E402
-from support.ports import free_port  # noqa: E402
-from support.processes import wait_for  # noqa: E402
+from overseer.app import Exporter
+from overseer.config import load_config
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from testbed.icinga2 import Icinga2, push_api_user, push_config, running_icinga2
+from testbed.ports import free_port
+from testbed.processes import wait_for
 
 GROUPS = ("Power", "Motor", "Temp", "Laser", "Camera", "Wheel", "Arm", "Network", "Compute")
 SERVICES_PER_ROBOT = 1 + len(GROUPS)

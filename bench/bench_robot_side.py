@@ -8,18 +8,13 @@ everything DDS sends (data, heartbeats, acknowledgements, discovery) on this mac
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 from bench.common import Row, cpu_seconds, emit
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
-from support.processes import running_exporter, running_simulator, wait_for  # noqa: E402
+from testbed.ports import fresh_domain_id
+from testbed.processes import running_exporter, running_simulator, wait_for
 
 
 def loopback_bytes_sent() -> int:

@@ -26,7 +26,6 @@ import re
 import signal
 import statistics
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -47,13 +46,9 @@ from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition_formats import TEXT
 from overseer.serve.http import OverseerServer
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.ports import free_port, fresh_domain_id  # noqa: E402 - the test harness lives in tests/
-from support.processes import running_exporter, running_simulator, wait_for  # noqa: E402
-from support.prometheus import running_prometheus  # noqa: E402
+from testbed.ports import free_port, fresh_domain_id
+from testbed.processes import running_exporter, running_simulator, wait_for
+from testbed.prometheus import running_prometheus
 
 LEAVES = 50
 TARGET_MS = 250
@@ -61,7 +56,7 @@ FLOOR_RATIO = 1.5  # Prometheus's scrape of the exporter, against its scrape of 
 OPENMETRICS_RATIO = 1.3  # OpenMetrics against the text format, same run
 CPU_SHARE_TARGET = 5.0  # % of a core for a scrape every 5 s
 INTERVAL_SECONDS = 5
-# What Debian's Prometheus (2.42) sends; tests/test_scrape_negotiation.py holds it to the real one.
+# What Debian's Prometheus (2.42) sends; tests/serve/test_scrape_negotiation.py holds it to the real one.
 PROMETHEUS_ACCEPT = (
     "application/openmetrics-text;version=1.0.0,application/openmetrics-text;version=0.0.1;q=0.75,"
     "text/plain;version=0.0.4;q=0.5,*/*;q=0.1"

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import re
 import statistics
-import sys
 import tempfile
 import time
 import urllib.request
@@ -23,13 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bench.common import Row, emit, tree_cpu_seconds, tree_resident_bytes
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
-from support.processes import RunningProcess, overseer_command, running_exporter, spawn  # noqa: E402
-from support.scrapes import parse_scrape  # noqa: E402
+from testbed.ports import fresh_domain_id
+from testbed.processes import RunningProcess, overseer_command, running_exporter, spawn
+from testbed.scrapes import parse_scrape
 
 MEMORY_GROWTH_TARGET_MB = 5.0
 LATENCY_GROWTH_TARGET = 1.5  # late median at most this times the early one (plus 2 ms)

@@ -11,10 +11,8 @@ The 100-robot fleet gives the ratio that shows how the page scales.
 from __future__ import annotations
 
 import statistics
-import sys
 import time
 import urllib.request
-from pathlib import Path
 
 from playwright.sync_api import Browser
 
@@ -24,12 +22,8 @@ from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray
 from overseer.model import FleetLimits, FleetModel
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
+from testbed.browser import headless_chromium
 from testbed.model_server import serving
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.browser import headless_chromium  # noqa: E402 - the test harness lives in tests/
 
 LEAVES = 50
 SITES = 10

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import sys
 import tempfile
 import time
 import urllib.request
@@ -21,13 +20,9 @@ from pathlib import Path
 
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.fleet_publishers import messages_published, start_publishers
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from support.ports import fresh_domain_id  # noqa: E402 - the test harness lives in tests/
-from support.processes import running_exporter  # noqa: E402
-from support.zenoh import exporter_args, running_router_process, simulator_args  # noqa: E402
+from testbed.ports import fresh_domain_id
+from testbed.processes import running_exporter
+from testbed.zenoh import exporter_args, running_router_process, simulator_args
 
 
 def counted(url: str, transport: str, result: str) -> float:

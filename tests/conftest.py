@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from support.ports import fresh_domain_id
+from testbed.ports import fresh_domain_id
 
 
 @pytest.fixture

@@ -2,7 +2,8 @@
 
 Two implementations side by side, with the same hashes and results: `scan_python`, the reference, and
 `scan_compiled`, the same loop in C (in `codec/_cstatus.c`, beside the decoder it calls), which also
-tells whether the changed statuses fit the model's limits. `tests/test_compiled_codec.py` holds them equal.
+tells whether the changed statuses fit the model's limits. `tests/codec/test_compiled_codec.py` holds
+them equal.
 """
 
 from __future__ import annotations

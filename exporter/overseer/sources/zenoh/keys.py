@@ -17,7 +17,8 @@ from typing import NamedTuple
 from overseer.sources.topic_names import AGGREGATED, RAW
 
 DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs::msg::dds_::DiagnosticArray_"
-# REP-2011 hash of diagnostic_msgs/msg/DiagnosticArray (Jazzy); `tests/test_zenoh_keys.py` recomputes it.
+# REP-2011 hash of diagnostic_msgs/msg/DiagnosticArray (Jazzy); tests/sources/zenoh/test_zenoh_keys.py
+# recomputes it.
 DIAGNOSTIC_ARRAY_HASH = "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
 LIVELINESS_SPACE = "@ros2_lv"
 PUBLISHER_ENTITY = "MP"

@@ -1,0 +1,280 @@
+"""The shipped alert rules and Alertmanager example, checked by promtool and amtool and read like a mixin."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+from typing import Any
+
+import pytest
+import yaml
+
+from testbed.paths import REPO
+from testbed.prometheus import DEPLOY_PROMETHEUS, load_rules, parse_duration, selectors
+
+RULES_DIR = REPO / "alert_rules"
+DEFAULT_RULES = RULES_DIR / "overseer.rules.yml"
+FAST_RULES = RULES_DIR / "overseer-fast.rules.yml"
+RULE_TESTS = RULES_DIR / "overseer.rules.test.yml"
+ALERTMANAGER_EXAMPLE = RULES_DIR / "alertmanager.example.yml"
+RUNBOOK = REPO / "docs" / "runbook.md"
+
+RECEIVER_OF_SEVERITY = {"critical": "fleet-critical", "warning": "fleet-warning"}
+JOB_MATCHER = 'job="overseer"'
+RECORDING_RULE_NAME = re.compile(r"[a-z]+:[a-z_]+:[a-z0-9_]+")
+_MATCHER = re.compile(r'(\w+)(=~|!~|!=|=)"(.*)"')
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    """Run a command to completion, capturing its output."""
+    return subprocess.run(args, capture_output=True, text=True, timeout=60, check=False)
+
+
+def alerts(path: Any = DEFAULT_RULES) -> dict[str, dict[str, Any]]:
+    """The alerting rules of a rule file by name."""
+    return {rule["alert"]: rule for rule in load_rules(path) if "alert" in rule}
+
+
+def matches(matcher: str, labels: dict[str, str]) -> bool:
+    """Whether an Alertmanager matcher such as `alertname=~"Ros.+"` matches a label set."""
+    parsed = _MATCHER.fullmatch(matcher)
+    assert parsed, f"cannot read matcher {matcher!r}"
+    name, operator, value = parsed.groups()
+    actual = labels.get(name, "")
+    equal = re.fullmatch(value, actual) is not None if "~" in operator else actual == value
+    return equal != operator.startswith("!")
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_promtool_accepts_the_rules(rules: Any) -> None:
+    result = run("promtool", "check", "rules", str(rules))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_promtool_unit_tests_next_to_the_rules_pass() -> None:
+    result = run("promtool", "test", "rules", str(RULE_TESTS))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_every_alert_has_a_firing_and_a_quiet_unit_test() -> None:
+    document = yaml.safe_load(RULE_TESTS.read_text(encoding="utf-8"))
+    cases = [case for test in document["tests"] for case in test.get("alert_rule_test", [])]
+    firing = {case["alertname"] for case in cases if case["exp_alerts"]}
+    quiet = {case["alertname"] for case in cases if not case["exp_alerts"]}
+    assert set(alerts()) - firing == set(), "alerts without a firing test"
+    assert set(alerts()) - quiet == set(), "alerts without a not-firing test"
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_every_alert_has_for_severity_summary_description_and_a_runbook_section(rules: Any) -> None:
+    runbook_anchors = {
+        line.removeprefix("## ").strip().lower()
+        for line in RUNBOOK.read_text().splitlines()
+        if line.startswith("## ")
+    }
+    for name, rule in alerts(rules).items():
+        assert parse_duration(rule["for"]) > 0, name
+        assert rule["labels"]["severity"] in RECEIVER_OF_SEVERITY, name
+        annotations = rule["annotations"]
+        assert annotations["summary"] and annotations["description"], name
+        assert annotations["runbook_url"] == f"docs/runbook.md#{name.lower()}", name
+        assert name.lower() in runbook_anchors, f"docs/runbook.md has no section for {name}"
+
+
+def test_component_alerts_name_robot_and_component_and_say_where_the_status_message_is() -> None:
+    for name, rule in alerts().items():
+        if not name.startswith("RosComponent"):
+            continue
+        annotations = rule["annotations"]
+        assert "{{ $labels.robot }}" in annotations["summary"], name
+        assert "{{ $labels.component }}" in annotations["summary"], name
+        assert "/api/v1/robots/{{ $labels.robot }}" in annotations["description"], name
+
+
+def test_every_selector_selects_the_overseer_job() -> None:
+    for rule in load_rules(DEFAULT_RULES):
+        for selector in selectors(rule["expr"]):
+            assert JOB_MATCHER in selector.matchers, f"{rule.get('alert') or rule['record']}: {selector}"
+
+
+def test_recording_rules_are_named_level_metric_operations_after_the_metric_they_aggregate() -> None:
+    recording = [rule for rule in load_rules(DEFAULT_RULES) if "record" in rule]
+    assert recording
+    for rule in recording:
+        assert RECORDING_RULE_NAME.fullmatch(rule["record"]), rule["record"]
+        metric = rule["record"].split(":")[1]
+        assert metric in {selector.metric for selector in selectors(rule["expr"])}, rule["record"]
+
+
+def test_fast_profile_is_the_default_profile_with_shorter_for() -> None:
+    default, fast = load_rules(DEFAULT_RULES), load_rules(FAST_RULES)
+    assert [{**rule, "for": None} for rule in fast] == [{**rule, "for": None} for rule in default]
+    for name, rule in alerts(FAST_RULES).items():
+        assert parse_duration(rule["for"]) < parse_duration(alerts()[name]["for"]), name
+
+
+@pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
+def test_robot_down_fires_before_its_components_stale_alerts(config: str) -> None:
+    # A stopped robot's components turn STALE (stale_after 5s) before it counts as down (robot_timeout 10s).
+    # RosRobotDown must still fire first, by more than that gap plus one scrape and one evaluation, so that
+    # Alertmanager inhibits the STALE alerts before it sends them.
+    path = DEPLOY_PROMETHEUS / config
+    settings = yaml.safe_load(path.read_text(encoding="utf-8"))
+    (rule_file,) = settings["rule_files"]
+    rule = alerts(path.parent / rule_file)
+    margin = parse_duration(rule["RosComponentStale"]["for"]) - parse_duration(rule["RosRobotDown"]["for"])
+    intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
+        settings["global"]["evaluation_interval"]
+    )
+    assert margin > (10 - 5) + intervals
+
+
+def test_amtool_accepts_the_alertmanager_example() -> None:
+    result = run("amtool", "check-config", str(ALERTMANAGER_EXAMPLE))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+@pytest.mark.parametrize("name", sorted(alerts()))
+def test_every_alert_routes_to_the_receiver_of_its_severity(name: str) -> None:
+    severity = alerts()[name]["labels"]["severity"]
+    receiver = RECEIVER_OF_SEVERITY[severity]
+    result = run(
+        "amtool",
+        "config",
+        "routes",
+        "test",
+        f"--config.file={ALERTMANAGER_EXAMPLE}",
+        f"--verify.receivers={receiver}",
+        f"alertname={name}",
+        f"severity={severity}",
+        "robot=robot1",
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.strip() == receiver
+
+
+def test_alertmanager_groups_by_robot() -> None:
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    routes = [config["route"], *config["route"]["routes"]]
+    assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes)
+
+
+def test_a_down_robot_inhibits_exactly_the_component_alerts_of_the_same_robot() -> None:
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    robot_down = {"alertname": "RosRobotDown", **alerts()["RosRobotDown"]["labels"]}
+    inhibited = set()
+    for rule in config["inhibit_rules"]:
+        if all(matches(matcher, robot_down) for matcher in rule["source_matchers"]):
+            assert "robot" in rule["equal"]
+            inhibited |= {
+                name
+                for name, alert in alerts().items()
+                if all(
+                    matches(matcher, {"alertname": name, **alert["labels"]})
+                    for matcher in rule["target_matchers"]
+                )
+            }
+    assert inhibited == {
+        name for name in alerts() if "{{ $labels.component }}" in alerts()[name]["annotations"]["summary"]
+    }
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_component_alerts_carry_message_and_robot_link_in_annotations_never_in_labels(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        assert "message" not in rule.get("labels", {}), name
+        annotations = rule["annotations"]
+        if name.startswith("RosComponent"):
+            assert "ros_diagnostics_status_message{" in annotations["message"], name
+            assert '| label "message"' in annotations["message"], name
+        if name.startswith("Ros"):
+            assert "overseer_web_info{" in annotations["status_page_url"], name
+            link = '/?robot={{ reReplaceAll `\\+` "%20" ($labels.robot | urlquery) }}'
+            assert link in annotations["status_page_url"], name
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_template_queries_quote_label_values_with_q_so_hostile_names_stay_one_string(rules: Any) -> None:
+    for name, rule in alerts(rules).items():
+        for annotation, text in rule["annotations"].items():
+            if "| query" in text:
+                assert '"%s"' not in text and "=%q" in text, f"{name} {annotation}"
+
+
+TEMPLATES = RULES_DIR / "overseer.tmpl"
+
+
+def notification(*alerts: dict[str, Any], status: str = "firing") -> dict[str, Any]:
+    """Alertmanager's template data (the webhook's JSON) for one notification of robot alpha."""
+    return {
+        "receiver": "fleet-critical",
+        "status": status,
+        "alerts": [{"status": status, "startsAt": "2026-11-23T09:00:00Z", **alert} for alert in alerts],
+        "groupLabels": {"robot": "alpha"},
+        "commonLabels": {},
+        "commonAnnotations": {},
+        "externalURL": "http://alertmanager:9093",
+    }
+
+
+BATTERY_ERROR = {
+    "labels": {"alertname": "RosComponentError", "robot": "alpha", "component": "/Power/Battery"},
+    "annotations": {
+        "summary": "alpha: /Power/Battery is in ERROR",
+        "message": "battery critically low (4 %)",
+        "status_page_url": "https://ops.example/?robot=alpha",
+        "runbook_url": "docs/runbook.md#roscomponenterror",
+    },
+}
+ROBOT_DOWN = {
+    "labels": {"alertname": "RosRobotDown", "robot": "alpha"},
+    "annotations": {"summary": "alpha is down", "status_page_url": "https://ops.example/?robot=alpha"},
+}
+
+
+def render(tmp_path: Any, template: str, data: dict[str, Any]) -> str:
+    """`{{ template "<template>" . }}` rendered from the shipped templates by amtool."""
+    data_path = tmp_path / "data.json"
+    data_path.write_text(json.dumps(data), encoding="utf-8")
+    result = run(
+        "amtool",
+        "template",
+        "render",
+        f"--template.glob={TEMPLATES}",
+        f'--template.text={{{{ template "{template}" . }}}}',
+        f"--template.data={data_path}",
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_alertmanager_example_loads_the_shipped_templates() -> None:
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    assert [RULES_DIR / path for path in config["templates"]] == [TEMPLATES]
+
+
+def test_template_titles_a_battery_error_with_its_message(tmp_path: Any) -> None:
+    assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR)) == (
+        "alpha: Power/Battery ERROR — battery critically low (4 %)"
+    )
+
+
+def test_template_text_lists_every_alert_with_its_links(tmp_path: Any) -> None:
+    assert render(tmp_path, "overseer.text", notification(BATTERY_ERROR, ROBOT_DOWN)) == (
+        "alpha: Power/Battery ERROR — battery critically low (4 %)\n"
+        "  status page: https://ops.example/?robot=alpha\n"
+        "  runbook: docs/runbook.md#roscomponenterror\n"
+        "alpha is down\n"
+        "  status page: https://ops.example/?robot=alpha\n"
+    )
+    assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR, ROBOT_DOWN)) == (
+        "alpha: 2 firing, 0 resolved"
+    )
+
+
+def test_template_marks_resolved_alerts_and_leaves_out_an_empty_message(tmp_path: Any) -> None:
+    quiet = {**BATTERY_ERROR, "annotations": {**BATTERY_ERROR["annotations"], "message": ""}}
+    assert render(tmp_path, "overseer.title", notification(quiet, status="resolved")) == (
+        "alpha: Power/Battery ERROR (resolved)"
+    )

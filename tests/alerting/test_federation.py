@@ -1,0 +1,92 @@
+"""Beyond one machine: two exporter shards, a Prometheus per site, and a global one federating both.
+
+Every robot must reach the global view exactly once, and the shipped alert rules must fire there.
+The servers run the shipped deploy/federation configs, with only targets, intervals and (for speed)
+the fast rule profile swapped in.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from overseer.model.shard import Shard
+from testbed.paths import REPO
+from testbed.processes import running_exporter, running_simulator, wait_for
+from testbed.prometheus import Prometheus, running_prometheus
+
+FEDERATION = REPO / "deploy" / "federation"
+FAST_RULES = REPO / "alert_rules" / "overseer-fast.rules.yml"
+ROBOTS = [f"robot{i}" for i in range(1, 7)]
+
+
+def shipped(name: str) -> dict[str, Any]:
+    config: dict[str, Any] = yaml.safe_load((FEDERATION / name).read_text(encoding="utf-8"))
+    config["global"].update(scrape_interval="1s", scrape_timeout="1s", evaluation_interval="1s")
+    return config
+
+
+def site_config(site: str, exporter_url: str) -> dict[str, Any]:
+    config = shipped("prometheus-site.yml")
+    config["global"]["external_labels"]["site"] = site
+    config["scrape_configs"][0]["static_configs"] = [{"targets": [exporter_url.removeprefix("http://")]}]
+    return config
+
+
+def global_config(sites: list[Prometheus]) -> dict[str, Any]:
+    config = shipped("prometheus-global.yml")
+    config["rule_files"] = [str(FAST_RULES)]
+    del config["alerting"]
+    targets = [site.url.removeprefix("http://") for site in sites]
+    config["scrape_configs"][0]["static_configs"] = [{"targets": targets}]
+    return config
+
+
+def test_shipped_federation_configs_pass_promtool() -> None:
+    for name in ("prometheus-site.yml", "prometheus-global.yml"):
+        result = subprocess.run(
+            ["promtool", "check", "config", name], cwd=FEDERATION, capture_output=True, text=True, timeout=60
+        )
+        assert result.returncode == 0, result.stdout + result.stderr
+
+
+@pytest.mark.servers
+def test_global_prometheus_sees_every_robot_once_and_alerts(tmp_path: Path, dds_domain: int) -> None:
+    shards = [{r for r in ROBOTS if Shard(i, 2).owns(r)} for i in range(2)]
+    assert all(shards), "the fleet must span both shards"
+    with (
+        running_exporter(tmp_path, dds_domain, "--shard=0/2") as shard_a,
+        running_exporter(tmp_path, dds_domain, "--shard=1/2") as shard_b,
+        running_simulator(tmp_path, dds_domain, f"--robots={len(ROBOTS)}", "--rate=2"),
+        running_prometheus(tmp_path, site_config("site-a", shard_a.url)) as site_a,
+        running_prometheus(tmp_path, site_config("site-b", shard_b.url)) as site_b,
+        running_prometheus(tmp_path, global_config([site_a, site_b])) as central,
+    ):
+
+        def robots_seen() -> dict[str, list[str]] | None:
+            series = central.query('ros_diagnostics_robot_up{job="overseer"} == 1')
+            seen: dict[str, list[str]] = {}
+            for sample in series:
+                seen.setdefault(sample["metric"]["robot"], []).append(sample["metric"]["site"])
+            return seen if set(seen) == set(ROBOTS) else None
+
+        seen = wait_for(robots_seen, 60, interval=1.0, message="every robot in the global view")
+        assert all(len(sites) == 1 for sites in seen.values()), seen
+        assert {r for r, sites in seen.items() if sites == ["site-a"]} == shards[0]
+        assert {r for r, sites in seen.items() if sites == ["site-b"]} == shards[1]
+        counted = central.query('count(ros_diagnostics_level{job="overseer"})')
+        assert float(counted[0]["value"][1]) == 15 * len(ROBOTS)
+
+        def firing_error_robots() -> set[str] | None:
+            robots = {
+                alert["labels"]["robot"]
+                for alert in central.alerts()
+                if alert["labels"]["alertname"] == "RosComponentError" and alert["state"] == "firing"
+            }
+            return robots if robots == set(ROBOTS) else None
+
+        wait_for(firing_error_robots, 90, interval=1.0, message="RosComponentError firing for every robot")
