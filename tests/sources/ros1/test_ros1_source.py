@@ -22,7 +22,7 @@ from overseer.config.ros1 import Ros1Config, Ros1Robot
 from overseer.fleet.documents import robot_document
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
-from overseer.sources import ros1 as ros1_source
+from overseer.sources.ros1 import source as ros1_source
 from overseer.sources.ros1.source import Ros1Source
 from overseer.sources.ros1.tcpros import (
     TcprosError,
