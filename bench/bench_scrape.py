@@ -153,7 +153,7 @@ def family_sizes(body: bytes) -> dict[str, tuple[int, int]]:
     sizes: Tally[str] = Tally()
     family = ""
     for line in body.splitlines(keepends=True):
-        if line.startswith(b"# TYPE "):
+        if line.startswith((b"# HELP ", b"# TYPE ")):
             family = line.split()[2].decode()
         if not line.startswith(b"#"):
             samples[family] += 1
@@ -265,8 +265,9 @@ def measure_prometheus(robots: int, components: int, workers: int, seconds: floa
     ]
     if workers == 1:
         for family, (count, size) in family_sizes(body).items():
-            rows.append(Row("scrape", f"{label}: family {family}", count, "samples"))
-            rows.append(Row("scrape", f"{label}: family {family}, bytes", size / 1e6, "MB"))
+            if count:
+                rows.append(Row("scrape", f"{label}: family {family}", count, "samples"))
+                rows.append(Row("scrape", f"{label}: family {family}, bytes", size / 1e6, "MB"))
     return rows
 
 

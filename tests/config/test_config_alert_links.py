@@ -29,17 +29,20 @@ def test_defaults_label_the_messages_of_problems_cut_to_100_characters_and_link_
     config = load_config(None)
     assert (config.metrics.message_labels, config.metrics.message_label_length) == ("problems", 100)
     assert config.web.external_url is None
+    assert config.metrics.level_changes is True
 
 
 def test_file_sets_message_labels_and_external_url(tmp_path: Path) -> None:
     text = (
         "web:\n  external_url: https://ops.example/overseer/\n"
         "metrics:\n  message_labels: all\n  message_label_length: 40\n  value_keys: [voltage]\n"
+        "  level_changes: false\n"
     )
     config = load_config(write(tmp_path, text))
     assert config.web.external_url == "https://ops.example/overseer"
     assert (config.metrics.message_labels, config.metrics.message_label_length) == ("all", 40)
     assert config.metrics.value_keys == ("voltage",)
+    assert config.metrics.level_changes is False
 
 
 def test_external_url_flag_overrides_the_file(tmp_path: Path) -> None:
@@ -63,6 +66,7 @@ def test_external_url_flag_overrides_the_file(tmp_path: Path) -> None:
             "metrics:\n  message_label_length: '100'\n",
             "metrics.message_label_length: expected an integer from 1 to 1024, got '100'",
         ),
+        ("metrics:\n  level_changes: 'no'\n", "metrics.level_changes: expected true or false, got 'no'"),
         (
             "web:\n  external_url: ops.example\n",
             "web.external_url: expected http(s)://HOST[:PORT][/PATH], got 'ops.example'",

@@ -69,20 +69,25 @@ def assert_equal_in_both_formats(rendering: Rendering) -> bytes:
 
 
 @pytest.mark.parametrize(
-    ("value_keys", "messages", "external_url"),
+    ("value_keys", "messages", "external_url", "level_changes"),
     [
-        (".*", MessageLabels(), None),
-        ("v|big", MessageLabels(), None),
-        (".*", MessageLabels("all", 20), 'https://ops.example/over"seer\\\n'),
-        (".*", MessageLabels("none"), "http://127.0.0.1:9849"),
+        (".*", MessageLabels(), None, True),
+        ("v|big", MessageLabels(), None, True),
+        (".*", MessageLabels("all", 20), 'https://ops.example/over"seer\\\n', True),
+        (".*", MessageLabels("none"), "http://127.0.0.1:9849", True),
+        ("(?!)", MessageLabels(), None, False),  # the cheapest: no values, no level changes
     ],
 )
 def test_fast_exposition_equals_the_oracle_in_both_formats_through_changes_staleness_and_expiry(
-    value_keys: str, messages: MessageLabels, external_url: str | None
+    value_keys: str, messages: MessageLabels, external_url: str | None, level_changes: bool
 ) -> None:
     model, clock = fleet()
-    rendering = Rendering(model, value_keys, messages=messages, external_url=external_url)
+    rendering = Rendering(
+        model, value_keys, messages=messages, external_url=external_url, level_changes=level_changes
+    )
     fast = assert_equal_in_both_formats(rendering)
+    assert (b"ros_diagnostics_level_changes_total{" in fast) is level_changes
+    assert (b"ros_diagnostics_value{" in fast) is (value_keys != "(?!)")
     # 8 robots of 13 components; the first component of robots 0 and 4 is the only one at OK.
     assert (
         fast.count(b"ros_diagnostics_status_message{")

@@ -42,8 +42,10 @@ class OracleCollector(Collector):
         *,
         messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
         external_url: str | None = None,
+        level_changes: bool = True,
     ) -> None:
         """Collect from `model`, exporting key-values whose key fully matches `value_keys`."""
+        self._level_changes = level_changes
         self._model = model
         self._value_keys = value_keys
         self._transports = tuple(transports)
@@ -74,7 +76,8 @@ class OracleCollector(Collector):
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
                 add(contract.LEVEL, labels, float(snapshot.component_level(robot, key, component, up)))
-                add(contract.LEVEL_CHANGES, labels, float(component.level_changes))
+                if self._level_changes:
+                    add(contract.LEVEL_CHANGES, labels, float(component.level_changes))
                 for value_key, number in numbers.pairs(component.values):
                     add(contract.VALUE, (*labels, value_key), number)
                 message = self._messages.label(component)

@@ -29,13 +29,21 @@ class Rendering:
         *,
         messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
         external_url: str | None = None,
+        level_changes: bool = True,
     ) -> None:
         """Render `model` exporting the key-values `value_keys` matches, with these collectors appended."""
         pattern = re.compile(value_keys)
         transports, extra = tuple(transports), tuple(extra_collectors)
-        self.exposition = FleetExposition(model, pattern, messages=messages)
+        self.exposition = FleetExposition(model, pattern, messages=messages, level_changes=level_changes)
         self.assembler = ExpositionAssembler(transports, extra, external_url)
-        oracle = OracleCollector(model, pattern, transports, messages=messages, external_url=external_url)
+        oracle = OracleCollector(
+            model,
+            pattern,
+            transports,
+            messages=messages,
+            external_url=external_url,
+            level_changes=level_changes,
+        )
         self.registry = oracle_registry(oracle, *extra)
 
     def fast(self, fmt: ExpositionFormat = TEXT) -> bytes:

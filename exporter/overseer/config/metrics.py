@@ -7,11 +7,11 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from overseer.config.errors import ConfigError
-from overseer.config.parsers import listed, string, whole_number
+from overseer.config.parsers import boolean, listed, string, whole_number
 
 MESSAGE_LABEL_MODES = ("none", "problems", "all")
 DEFAULT_MESSAGE_LABEL_LENGTH = 100
-KEYS = {"value_keys", "message_labels", "message_label_length"}
+KEYS = {"value_keys", "message_labels", "message_label_length", "level_changes"}
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,8 @@ class MetricsConfig:
     # its message label keeps, "…" included when cut.
     message_labels: str = "problems"
     message_label_length: int = DEFAULT_MESSAGE_LABEL_LENGTH
+    # ros_diagnostics_level_changes_total, a series per component (flapping); off saves that many.
+    level_changes: bool = True
 
     @property
     def value_key_pattern(self) -> re.Pattern[str]:
@@ -43,6 +45,8 @@ def metrics_config(raw: dict[str, Any]) -> MetricsConfig:
     if "message_label_length" in raw:
         length = whole_number(raw["message_label_length"], "metrics.message_label_length", 1, 1024)
         config = replace(config, message_label_length=length)
+    if "level_changes" in raw:
+        config = replace(config, level_changes=boolean(raw["level_changes"], "metrics.level_changes"))
     if "value_keys" in raw:
         patterns = tuple(
             string(p, "metrics.value_keys") for p in listed(raw["value_keys"], "metrics.value_keys")

@@ -66,14 +66,17 @@ class FleetExposition:
         value_keys: re.Pattern[str],
         *,
         messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
+        level_changes: bool = True,
     ) -> None:
         """Render `model`, exporting key-values whose key fully matches `value_keys`.
 
-        `messages` chooses the components with a status-message series and the length of its label.
+        `messages` chooses the components with a status-message series and the length of its label;
+        `level_changes` False leaves out `ros_diagnostics_level_changes_total` (a series per component).
         """
         self._model = model
         self._value_keys = value_keys
         self._messages = messages
+        self._level_changes = level_changes
         self._robots: dict[str, _RobotLines] = {}
         self._lock = threading.Lock()
 
@@ -83,7 +86,7 @@ class FleetExposition:
             return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> ExpositionPart:
-        render = _RenderCache(NumericValues(self._value_keys), self._messages)
+        render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
         robot_level, robot_up, last_message = [], [], []
@@ -152,6 +155,7 @@ def _lines_for(
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
     # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
     escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
+    with_changes = render.level_changes
     message_prefix = "ros_diagnostics_status_message{"
     robot_label = f'robot="{escape(robot.name)}"'
     reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
@@ -181,7 +185,9 @@ def _lines_for(
         lines.add(
             index,
             f"ros_diagnostics_level{labels}{_LEVEL_VALUES[levels[index]]}\n".encode(),
-            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode(),
+            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode()
+            if with_changes
+            else b"",
             values.encode(),
             b""
             if message is None
@@ -273,8 +279,9 @@ _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
 class _RenderCache:
     """Memoized escaping and number formatting for one render."""
 
-    def __init__(self, numbers: NumericValues, messages: MessageLabels) -> None:
+    def __init__(self, numbers: NumericValues, messages: MessageLabels, level_changes: bool) -> None:
         self.numbers = numbers
+        self.level_changes = level_changes
         self._message_length = messages.length
         # MessageLabels.wants, inlined (it runs for every component rendered); the tests hold them equal.
         self._all_messages, self._problem_messages = messages.mode == "all", messages.mode == "problems"

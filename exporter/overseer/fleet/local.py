@@ -54,7 +54,9 @@ class LocalFleet:
         model = FleetModel(config.fleet)
         metrics = config.metrics
         messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
-        exposition = FleetExposition(model, metrics.value_key_pattern, messages=messages)
+        exposition = FleetExposition(
+            model, metrics.value_key_pattern, messages=messages, level_changes=metrics.level_changes
+        )
         return cls(model, build_sources(config, model), exposition, events)
 
     def start(self) -> None:
