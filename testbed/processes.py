@@ -108,11 +108,18 @@ def spawn(
 
 @contextmanager
 def running_exporter(
-    tmp_path: Path, domain: int | None, *extra_args: str, port: int | None = None, timeout: float = 30.0
+    tmp_path: Path,
+    domain: int | None,
+    *extra_args: str,
+    port: int | None = None,
+    timeout: float = 30.0,
+    env: dict[str, str] | None = None,
+    loopback_flag: bool = True,
 ) -> Iterator[Exporter]:
     """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends.
 
-    It runs in `tmp_path`, so its files (the event history's database) stay with the test.
+    It runs in `tmp_path`, so its files (the event history's database) stay with the test; `env` adds to
+    its environment. `loopback_flag` False leaves out `--dds.loopback-only` (the environment says so).
     """
     port = port or free_port()
     args = [
@@ -120,11 +127,11 @@ def running_exporter(
         "run",
         f"--web.listen-address=127.0.0.1:{port}",
         *([f"--dds.domain={domain}"] if domain is not None else []),
-        "--dds.loopback-only",
+        *(["--dds.loopback-only"] if loopback_flag else []),
         *extra_args,
     ]
     log_path = tmp_path / f"exporter-{port}.log"
-    exporter = Exporter(spawn(args, log_path, cwd=tmp_path), log_path, f"http://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path, env=env, cwd=tmp_path), log_path, f"http://127.0.0.1:{port}")
     try:
         wait_until_healthy(exporter, timeout)
         yield exporter

@@ -14,6 +14,7 @@ from prometheus_client.registry import Collector
 
 from overseer.codec import compiled
 from overseer.config import Config
+from overseer.config.loading import ros_settings
 from overseer.fleet.interface import Fleet
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.pooled import PooledFleet
@@ -85,6 +86,8 @@ class Exporter:
             raise
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
+        if self.config.dds.enabled or self.config.zenoh.enabled:
+            log.info("ROS settings: %s", ros_settings(self.config))
         if compiled.enabled:
             log.info("%s", compiled.describe())
         else:

@@ -5,7 +5,9 @@ Each section is read by its own module; this one knows which sections there are.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +22,7 @@ from overseer.config.ingest import IngestConfig
 from overseer.config.metrics import MetricsConfig
 from overseer.config.parsers import first_line, reject_unknown, section, string
 from overseer.config.ros1 import Ros1Config
+from overseer.config.ros_environment import Origin, apply_ros_defaults
 from overseer.config.web import WebConfig
 from overseer.config.zenoh import ZenohConfig
 from overseer.model import FleetLimits
@@ -47,10 +50,19 @@ class Config:
     events: EventsConfig = field(default_factory=EventsConfig)
     log_format: str = "text"
     icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
+    origins: tuple[Origin, ...] = ()  # where the ROS settings came from (flag, file, ROS_* variable)
 
 
-def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
-    """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags."""
+def load_config(
+    path: str | Path | None,
+    overrides: dict[str, Any] | None = None,
+    environ: Mapping[str, str] | None = None,
+) -> Config:
+    """Read the YAML file at `path` (None for defaults) and apply dotted-key `overrides` from flags.
+
+    ROS's variables in `environ` (default: this process's environment) give the ROS 2 transports the
+    values the flags and the file leave unset, as every ROS 2 node reads them.
+    """
     raw: dict[str, Any] = {}
     if path is not None:
         try:
@@ -70,7 +82,8 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         if not isinstance(target, dict):
             raise ConfigError(f"{name}: expected a mapping, got {target!r}")
         target[key or name] = value
-    return config_from_dict(raw)
+    origins = apply_ros_defaults(raw, set(overrides or {}), os.environ if environ is None else environ)
+    return replace(config_from_dict(raw), origins=origins)
 
 
 def config_from_dict(raw: dict[str, Any]) -> Config:
@@ -102,3 +115,16 @@ def _choice(raw: dict[str, Any], key: str, choices: tuple[str, ...], default: st
             f"{key}: expected {'one of ' if len(choices) > 2 else ''}{expected}, got {raw[key]!r}"
         )
     return value
+
+
+def ros_settings(config: Config) -> str:
+    """The ROS settings of the enabled transports and where each came from, for the log at start."""
+    values: dict[str, object] = {}
+    if config.dds.enabled:
+        values["dds.domains"] = ",".join(str(domain.id) for domain in config.dds.domains)
+        values["dds.loopback_only"] = str(config.dds.loopback_only).lower()
+        values["dds.peers"] = ",".join(str(peer) for peer in config.dds.peers) or "none"
+    if config.zenoh.enabled:
+        values["zenoh.domain"] = config.zenoh.domain
+    sources = {origin.key: origin.source for origin in config.origins}
+    return "; ".join(f"{key} {value} ({sources.get(key, 'default')})" for key, value in values.items())
