@@ -12,7 +12,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
 from overseer.sources.dds.cyclone_config import configure_domain, loopback_only_config
-from overseer.sources.dds.source import ROS_DEFAULT_QOS
+from overseer.sources.dds.source import BEST_EFFORT_QOS, ROS_DEFAULT_QOS
 from overseer.sources.dds.types import DiagnosticArray
 
 
@@ -49,11 +49,13 @@ def _participant(domain_id: int) -> DomainParticipant:
 
 
 @contextmanager
-def raw_diagnostics_writer(domain_id: int, dds_topic: str) -> Iterator[RawDiagnosticsWriter]:
-    """A loopback-only writer on `dds_topic` in `domain_id`, deleted when the block ends."""
+def raw_diagnostics_writer(
+    domain_id: int, dds_topic: str, best_effort: bool = False
+) -> Iterator[RawDiagnosticsWriter]:
+    """A loopback-only writer on `dds_topic` in `domain_id` (reliable, or best-effort), deleted at the end."""
     participant = _participant(domain_id)
     topic = Topic(participant, dds_topic, DiagnosticArray, qos=ROS_DEFAULT_QOS)
-    writer = DataWriter(participant, topic, qos=ROS_DEFAULT_QOS)
+    writer = DataWriter(participant, topic, qos=BEST_EFFORT_QOS if best_effort else ROS_DEFAULT_QOS)
     try:
         yield RawDiagnosticsWriter(writer)
     finally:

@@ -8,8 +8,11 @@ from typing import Any
 
 import pytest
 
+from overseer.codec.cdr import encode_diagnostic_array
 from overseer.levels import Level
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
+from testbed.dds_writer import raw_diagnostics_writer
 from testbed.ports import fresh_domain_id
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
 
@@ -269,3 +272,28 @@ def test_every_status_changes_at_every_publication_with_vary_values_all(
             message="every reading changed",
         )
     assert all(12.0 <= value < 13.0 for value in (*first.values(), *second.values()))
+
+
+def test_best_effort_writers_are_heard_beside_reliable_ones_on_one_topic(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    """A reliable reader never matches a best-effort writer: the topic is then read best-effort."""
+    reliable_statuses = (DiagnosticStatus(0, "/node_a/ok", "fine", "", ()),)
+    best_effort_statuses = (DiagnosticStatus(2, "/node_b/lidar", "no scans", "", ()),)
+    with (
+        running_exporter(tmp_path, dds_domain, "--ingest.workers=1") as exporter,
+        raw_diagnostics_writer(dds_domain, "rt/mixed/diagnostics") as reliable,
+        raw_diagnostics_writer(dds_domain, "rt/mixed/diagnostics", best_effort=True) as best_effort,
+        raw_diagnostics_writer(dds_domain, "rt/quick/diagnostics_agg", best_effort=True) as alone,
+    ):
+
+        def heard() -> bool:
+            reliable.write(encode_diagnostic_array(DiagnosticArray(0, 0, "", reliable_statuses)))
+            best_effort.write(encode_diagnostic_array(DiagnosticArray(0, 0, "", best_effort_statuses)))
+            alone.write(encode_diagnostic_array(DiagnosticArray(0, 0, "", best_effort_statuses)))
+            mixed, quick = exporter.robot("mixed"), exporter.robot("quick")
+            names = {component["name"] for component in (mixed or {}).get("components", [])}
+            return quick is not None and quick["up"] and names == {"/node_a/ok", "/node_b/lidar"}
+
+        wait_for(heard, 30, interval=0.5, message="both writers of mixed, and quick")
+    assert "best-effort, as a writer of it is" in exporter.log()

@@ -4,6 +4,10 @@ Robots are found on the DDS built-in publication topic: every writer of `rt/<ns>
 `rt/<ns>/diagnostics` is robot `<ns>`, so a robot that starts later is picked up with no restart.
 Samples are taken as raw CDR and decoded by `overseer.codec.cdr`, which is faster than the generic
 deserializer and turns a malformed payload into a counted `decode_error` instead of an exception.
+
+A reliable reader never matches a best-effort writer (micro-ROS nodes, sensor-data QoS), while a
+best-effort reader matches both: a topic is read reliably while every writer of it is reliable, and
+best-effort from the first best-effort writer on (the discovery sample tells each writer's reliability).
 """
 
 from __future__ import annotations
@@ -52,6 +56,8 @@ ROS_DEFAULT_QOS = Qos(
     Policy.Durability.Volatile,
     Policy.History.KeepLast(10),
 )
+# For topics with a best-effort writer: matches reliable and best-effort writers alike.
+BEST_EFFORT_QOS = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(10))
 
 
 @dataclass
@@ -62,6 +68,7 @@ class _DomainSession:
     publications: BuiltinDataReader
     readers: dict[str, DataReader[DiagnosticArray]] = field(default_factory=dict)
     writers: dict[Any, str] = field(default_factory=dict)  # publication key → DDS topic name
+    best_effort_topics: set[str] = field(default_factory=set)  # a writer of each is best-effort
 
 
 class DdsSource:
@@ -150,7 +157,21 @@ class DdsSource:
                     )
                     continue
                 session.writers[sample.key] = topic_name
+                if sample.qos[Policy.Reliability] == Policy.Reliability.BestEffort:
+                    self._read_best_effort(session, topic_name)
                 self._subscribe(session, topic_name)
+
+    def _read_best_effort(self, session: _DomainSession, topic_name: str) -> None:
+        """From now on read `topic_name` best-effort: a reliable reader never hears its new writer."""
+        if topic_name in session.best_effort_topics:
+            return
+        session.best_effort_topics.add(topic_name)
+        reader = session.readers.pop(topic_name, None)
+        if reader is not None:
+            reader.__del__()  # `_subscribe` creates its best-effort successor
+            log.info(
+                "reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id
+            )
 
     def _subscribe(self, session: _DomainSession, topic_name: str) -> None:
         parsed = parse_dds_topic(topic_name)
@@ -169,11 +190,10 @@ class DdsSource:
         if not self._model.register(robot, TRANSPORT):
             log.warning("robot cap reached; not following %s on domain %d", topic_name, session.config.id)
             return
+        qos = BEST_EFFORT_QOS if topic_name in session.best_effort_topics else ROS_DEFAULT_QOS
         topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
         listener = Listener(on_data_available=self._on_data_callback(robot, topic_name))  # type: ignore[no-untyped-call]
-        session.readers[topic_name] = DataReader(
-            session.subscriber, topic, qos=ROS_DEFAULT_QOS, listener=listener
-        )
+        session.readers[topic_name] = DataReader(session.subscriber, topic, qos=qos, listener=listener)
         log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
 
     def _on_data_callback(self, robot: str, topic_name: str) -> Any:
