@@ -86,7 +86,7 @@ class Exporter:
             raise
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
-        if self.config.dds.enabled or self.config.zenoh.enabled:
+        if self.config.dds.enabled or self.config.zenoh.enabled or self.config.ros2.enabled:
             log.info("ROS settings: %s", ros_settings(self.config))
         if compiled.enabled:
             log.info("%s", compiled.describe())

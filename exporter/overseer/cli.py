@@ -150,6 +150,7 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help="do not join DDS (with Zenoh or ROS 1 only)",
     )
     _add_zenoh_flags(parser, exporter=True)
+    _add_ros2_flags(parser)
     parser.add_argument(
         "--shard",
         metavar="I/N",
@@ -175,6 +176,40 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--events.retention", dest="events_retention", metavar="DURATION")
     parser.add_argument("--events.max-size", dest="events_max_size", metavar="SIZE")
     _add_icinga2_flags(parser)
+
+
+def _add_ros2_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--ros2",
+        dest="ros2",
+        action="store_true",
+        help="join the robots' ROS 2 graph as a node through rclpy (pip install overseer[ros2]); the DDS "
+        "source is then off unless the configuration turns it on",
+    )
+    parser.add_argument("--ros2.node-name", dest="ros2_node_name", metavar="NAME", help="default overseer")
+    parser.add_argument(
+        "--ros2.domain", dest="ros2_domain", metavar="ID", type=int, help="default ROS_DOMAIN_ID, else 0"
+    )
+    parser.add_argument(
+        "--ros2.fleet-topic",
+        dest="ros2_fleet_topic",
+        metavar="TOPIC",
+        help="where the fleet's DiagnosticArray is published (default /overseer/fleet_diagnostics)",
+    )
+
+
+def _ros2_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The `ros2.*` keys given as flags; any of them turns the ROS 2 transport on."""
+    overrides: dict[str, Any] = {"ros2.enabled": True} if args.ros2 else {}
+    for flag, key in (
+        ("ros2_node_name", "node_name"),
+        ("ros2_domain", "domain"),
+        ("ros2_fleet_topic", "fleet_topic"),
+    ):
+        value = getattr(args, flag)
+        if value is not None:
+            overrides[f"ros2.{key}"] = value
+    return overrides
 
 
 def _add_icinga2_flags(parser: argparse.ArgumentParser) -> None:
@@ -326,6 +361,7 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.dds_disabled:
         overrides["dds.enabled"] = False
     overrides.update(_zenoh_overrides(args))
+    overrides.update(_ros2_overrides(args))
     if args.shard is not None:
         overrides["shard"] = args.shard
     if args.ingest_workers is not None:

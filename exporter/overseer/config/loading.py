@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from overseer.config import dds, events, fleet, icinga2, ingest, metrics, ros1, web, zenoh
+from overseer.config import dds, events, fleet, icinga2, ingest, metrics, ros1, ros2, web, zenoh
 from overseer.config.dds import DdsConfig
 from overseer.config.errors import ConfigError
 from overseer.config.events import EventsConfig
@@ -22,6 +22,7 @@ from overseer.config.ingest import IngestConfig
 from overseer.config.metrics import MetricsConfig
 from overseer.config.parsers import first_line, reject_unknown, section, string
 from overseer.config.ros1 import Ros1Config
+from overseer.config.ros2 import Ros2Config
 from overseer.config.ros_environment import Origin, apply_ros_defaults
 from overseer.config.web import WebConfig
 from overseer.config.zenoh import ZenohConfig
@@ -30,7 +31,7 @@ from overseer.model.shard import Shard
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
-_SECTIONS = {"web", "dds", "ros1", "zenoh", "fleet", "metrics", "ingest", "events"}
+_SECTIONS = {"web", "dds", "ros1", "zenoh", "ros2", "fleet", "metrics", "ingest", "events"}
 _TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2"}
 
 
@@ -42,6 +43,7 @@ class Config:
     dds: DdsConfig = field(default_factory=DdsConfig)
     ros1: Ros1Config = field(default_factory=Ros1Config)
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    ros2: Ros2Config = field(default_factory=Ros2Config)
     fleet: FleetLimits = field(default_factory=FleetLimits)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
@@ -89,11 +91,18 @@ def load_config(
 def config_from_dict(raw: dict[str, Any]) -> Config:
     """Validate a parsed configuration mapping into a `Config`."""
     reject_unknown(raw, "", _SECTIONS | _TOP_LEVEL_KEYS)
-    return Config(
+    ros2_section = section(raw, "ros2", ros2.KEYS)
+    dds_section = section(raw, "dds", dds.KEYS)
+    ros2_config = ros2.ros2_config(ros2_section)
+    if ros2_config.enabled and "enabled" not in dds_section:
+        # The ROS 2 node hears the robots the DDS source would: one of them follows them, unless told.
+        dds_section = {**dds_section, "enabled": False}
+    config = Config(
         web=web.web_config(section(raw, "web", web.KEYS)),
-        dds=dds.dds_config(section(raw, "dds", dds.KEYS)),
+        dds=dds.dds_config(dds_section),
         ros1=ros1.ros1_config(section(raw, "ros1", ros1.KEYS)),
         zenoh=zenoh.zenoh_config(section(raw, "zenoh", zenoh.KEYS)),
+        ros2=ros2_config,
         fleet=fleet.fleet_limits(section(raw, "fleet", fleet.KEYS)),
         metrics=metrics.metrics_config(section(raw, "metrics", metrics.KEYS)),
         ingest=ingest.ingest_config(section(raw, "ingest", ingest.KEYS)),
@@ -103,6 +112,13 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         log_format=_choice(raw, "log_format", LOG_FORMATS, "text"),
         icinga2=None if raw.get("icinga2") is None else icinga2.icinga2_config(raw["icinga2"]),
     )
+    shared = {domain.id for domain in config.dds.domains} & {config.ros2.domain}
+    if config.dds.enabled and config.ros2.enabled and shared:
+        raise ConfigError(
+            f"ros2.enabled: the DDS source and the ROS 2 node would both follow domain {shared.pop()}'s "
+            "robots; turn one off (dds.enabled: false) or give them different domains"
+        )
+    return config
 
 
 def _choice(raw: dict[str, Any], key: str, choices: tuple[str, ...], default: str) -> str:
@@ -126,5 +142,7 @@ def ros_settings(config: Config) -> str:
         values["dds.peers"] = ",".join(str(peer) for peer in config.dds.peers) or "none"
     if config.zenoh.enabled:
         values["zenoh.domain"] = config.zenoh.domain
+    if config.ros2.enabled:
+        values["ros2.domain"] = config.ros2.domain
     sources = {origin.key: origin.source for origin in config.origins}
     return "; ".join(f"{key} {value} ({sources.get(key, 'default')})" for key, value in values.items())

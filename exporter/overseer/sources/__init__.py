@@ -24,7 +24,12 @@ class Source(Protocol):
 
 def enabled_transports(config: Config) -> list[str]:
     """The names of the transports `config` enables, in the order `build_sources` creates them."""
-    enabled = [("dds", config.dds.enabled), ("ros1", config.ros1.enabled), ("zenoh", config.zenoh.enabled)]
+    enabled = [
+        ("dds", config.dds.enabled),
+        ("ros1", config.ros1.enabled),
+        ("zenoh", config.zenoh.enabled),
+        ("ros2", config.ros2.enabled),
+    ]
     return [name for name, on in enabled if on]
 
 
@@ -44,4 +49,9 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
         from overseer.sources.zenoh.source import ZenohSource
 
         sources.append(ZenohSource(config.zenoh, model, config.shard))
+    if config.ros2.enabled:
+        from overseer.sources.ros2.source import Ros2Source, node_name
+
+        name = node_name(config.ros2, config.shard.worker, config.shard.workers)
+        sources.append(Ros2Source(config.ros2, model, name, config.shard))
     return sources

@@ -35,3 +35,8 @@ def dds_topic_name(namespace: str, kind: str) -> str:
     """The DDS topic carrying ROS topic `/<namespace>/<kind>`."""
     namespace = namespace.strip("/")
     return f"{ROS_TOPIC_PREFIX}{namespace}/{kind}" if namespace else f"{ROS_TOPIC_PREFIX}{kind}"
+
+
+def parse_ros_topic(ros_topic: str) -> DiagnosticsTopic | None:
+    """Split ROS topic `/<ns>/diagnostics_agg` or `/<ns>/diagnostics`, as `parse_dds_topic` its DDS name."""
+    return parse_dds_topic(ROS_TOPIC_PREFIX + ros_topic[1:]) if ros_topic.startswith("/") else None
