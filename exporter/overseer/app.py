@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from prometheus_client.registry import Collector
 
@@ -29,6 +30,9 @@ from overseer.serve.http import OverseerServer
 from overseer.serve.web_config import load_web_config
 from overseer.sources import enabled_transports
 
+if TYPE_CHECKING:
+    from overseer.push.ros2_fleet import FleetDiagnosticsPublisher
+
 log = logging.getLogger(__name__)
 
 
@@ -46,6 +50,7 @@ class Exporter:
     server: OverseerServer = field(init=False)
     history: EventHistory | None = None
     icinga2_push: Icinga2Push | None = None
+    ros2_fleet: FleetDiagnosticsPublisher | None = None
 
     def __post_init__(self) -> None:
         config = self.config
@@ -58,6 +63,10 @@ class Exporter:
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(config.icinga2, self.fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
+        if config.ros2.enabled and config.ros2.fleet_topic is not None:
+            from overseer.push.ros2_fleet import FleetDiagnosticsPublisher  # rclpy only with --ros2
+
+            self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
         security = load_web_config(config.web.config_file)
         events = events_route(None if self.history is None else self.history.store)
@@ -94,6 +103,8 @@ class Exporter:
             log.warning("%s", compiled.describe())
         if self.icinga2_push is not None:
             self.icinga2_push.start()
+        if self.ros2_fleet is not None:
+            self.ros2_fleet.start()
 
     def stop(self) -> None:
         """Stop serving and leave the transports."""
@@ -101,6 +112,8 @@ class Exporter:
             self.fleet.prepare_stop()
         if self.icinga2_push is not None:
             self.icinga2_push.stop()
+        if self.ros2_fleet is not None:
+            self.ros2_fleet.stop()
         self.server.shutdown()
         self.server.server_close()
         self.fleet.stop()

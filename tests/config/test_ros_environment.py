@@ -119,3 +119,31 @@ def test_an_exporter_started_with_ros_domain_id_alone_hears_that_domain(
     log = exporter.log()
     assert f"dds.domains {dds_domain} (ROS_DOMAIN_ID={dds_domain})" in log
     assert "dds.loopback_only true (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)" in log
+
+
+def test_ros2_turns_the_dds_source_off_unless_the_file_turns_it_on(tmp_path: Path) -> None:
+    config = load_config(None, {"ros2.enabled": True}, environ={"ROS_DOMAIN_ID": "5"})
+    assert config.ros2.enabled and not config.dds.enabled and config.ros2.domain == 5
+    both = load_config(
+        write(tmp_path, "dds:\n  enabled: true\n  domains: [1]\nros2:\n  domain: 2\n"), environ={}
+    )
+    assert both.dds.enabled and both.ros2.enabled
+    with pytest.raises(ConfigError) as raised:
+        load_config(write(tmp_path, "dds:\n  enabled: true\nros2:\n  enabled: true\n"), environ={})
+    assert "the DDS source and the ROS 2 node would both follow domain 0's robots" in str(raised.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("ros2:\n  node_name: 'over seer'\n", "ros2.node_name: expected a ROS node name"),
+        ("ros2:\n  fleet_topic: fleet\n", "ros2.fleet_topic: expected a topic name such as /overseer/fleet"),
+        ("ros2:\n  topics: [rosout]\n", "ros2.topics: expected diagnostics_agg or diagnostics, got 'rosout'"),
+        ("ros2:\n  domain: 300\n", "ros2.domain: expected a ROS domain id from 0 to 232, got 300"),
+        ("ros2:\n  fleet_period: soon\n", "ros2.fleet_period: expected a duration such as 5s, got 'soon'"),
+    ],
+)
+def test_bad_ros2_settings_name_key_and_value(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ConfigError) as raised:
+        load_config(write(tmp_path, text), environ={})
+    assert message in str(raised.value)

@@ -5,6 +5,9 @@ Robots are found on the DDS built-in publication topic: every writer of `rt/<ns>
 Samples are taken as raw CDR and decoded by `overseer.codec.cdr`, which is faster than the generic
 deserializer and turns a malformed payload into a counted `decode_error` instead of an exception.
 
+A writer leaving (a clean exit, or its lease running out) is announced on the same topic: when a robot's
+last diagnostics writer leaves, the robot is down at once, not after `robot_timeout`.
+
 A reliable reader never matches a best-effort writer (micro-ROS nodes, sensor-data QoS), while a
 best-effort reader matches both: a topic is read reliably while every writer of it is reliable, and
 best-effort from the first best-effort writer on (the discovery sample tells each writer's reliability).
@@ -147,7 +150,9 @@ class DdsSource:
             for sample in session.publications.take(N=256):
                 topic_name = sample.topic_name
                 if topic_name is None:
-                    session.writers.pop(sample.key, None)
+                    left = session.writers.pop(sample.key, None)
+                    if left is not None:
+                        self._writer_left(session, left)
                     continue
                 if parse_dds_topic(topic_name) is None:
                     continue
@@ -160,6 +165,25 @@ class DdsSource:
                 if sample.qos[Policy.Reliability] == Policy.Reliability.BestEffort:
                     self._read_best_effort(session, topic_name)
                 self._subscribe(session, topic_name)
+                robot = self._robot_of(session, topic_name)
+                if robot is not None:
+                    self._model.set_publisher_alive(robot, True)
+
+    def _robot_of(self, session: _DomainSession, topic_name: str) -> str | None:
+        parsed = parse_dds_topic(topic_name)
+        return None if parsed is None else parsed.namespace or session.config.unnamespaced_robot
+
+    def _writer_left(self, session: _DomainSession, topic_name: str) -> None:
+        """A writer of `topic_name` left: its robot is down at once when no writer of its topics is left."""
+        robot = self._robot_of(session, topic_name)
+        if robot is None:
+            return
+        remaining = {
+            self._robot_of(other, name) for other in self._sessions for name in other.writers.values()
+        }
+        if robot not in remaining:
+            self._model.set_publisher_alive(robot, False)
+            log.info("robot %s: its last diagnostics writer left", robot)
 
     def _read_best_effort(self, session: _DomainSession, topic_name: str) -> None:
         """From now on read `topic_name` best-effort: a reliable reader never hears its new writer."""
