@@ -292,7 +292,17 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
         help="send DDS discovery to this host directly, e.g. the exporter's (networks without multicast)",
     )
     parser.add_argument(
-        "--transport", choices=["dds", "zenoh"], default="dds", help="publish over DDS or Zenoh (default dds)"
+        "--transport",
+        choices=["dds", "zenoh", "ros2"],
+        default="dds",
+        help="publish over DDS (Cyclone), Zenoh, or through rclpy as ROS 2 nodes do (default dds)",
+    )
+    parser.add_argument(
+        "--ros2.qos",
+        dest="ros2_qos",
+        choices=["reliable", "best_effort"],
+        default="reliable",
+        help="with --transport ros2: the publishers' reliability (default reliable, as ROS's default)",
     )
     _add_zenoh_flags(parser, exporter=False)
     parser.add_argument(
@@ -506,12 +516,21 @@ def _simulate(args: argparse.Namespace) -> int:
     from overseer.simulator.publisher import EventError, FleetSimulator
 
     try:
-        simulator = FleetSimulator(settings) if args.transport == "dds" else _zenoh_simulator(args, settings)
-    except EventError as error:
+        if args.transport == "dds":
+            simulator = FleetSimulator(settings)
+        elif args.transport == "zenoh":
+            simulator = _zenoh_simulator(args, settings)
+        else:
+            from overseer.simulator.ros2_publisher import Ros2FleetSimulator
+
+            simulator = Ros2FleetSimulator(settings, best_effort=args.ros2_qos == "best_effort")
+    except (EventError, ValueError) as error:
         raise ConfigError(str(error)) from None
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: simulator.stop())
     where = f"DDS domain {settings.domain}"
+    if args.transport == "ros2":
+        where = f"ROS 2 domain {settings.domain} through rclpy ({args.ros2_qos})"
     if args.transport == "zenoh":
         where = (
             f"Zenoh ({'bridge keys' if args.zenoh_bridge_keys else f'rmw_zenoh, domain {settings.domain}'})"

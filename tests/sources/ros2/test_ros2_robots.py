@@ -16,7 +16,7 @@ import pytest
 
 from overseer.codec.cdr import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from testbed.processes import Exporter, running_exporter, wait_for
+from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
 from testbed.ros2 import graph_node, ros2_environment, running_robots, start_robot
 
 pytestmark = pytest.mark.servers  # every test here starts real servers or middleware
@@ -219,3 +219,33 @@ def test_garbage_hostile_names_and_the_caps_hold_over_ros2(tmp_path: Path, dds_d
         assert exporter.get("/-/healthy") == b"OK\n"
     assert names == set(hostile)
     assert b'component="new\\nline"' in metrics and b'robot="hostile"' in metrics
+
+
+@pytest.mark.parametrize(("source", "qos"), [("ros2", "reliable"), ("dds", "best_effort")])
+def test_the_simulator_publishes_a_fleet_of_rclpy_robots(
+    tmp_path: Path, dds_domain: int, source: str, qos: str
+) -> None:
+    flags = (
+        "--robots=4",
+        "--components=10",
+        "--namespace-prefix=site_b/sim",
+        "--transport=ros2",
+        f"--ros2.qos={qos}",
+        "--event=4:site_b/sim2:stop",
+    )
+    with (
+        exporter_for(tmp_path, dds_domain, source, *FAST) as exporter,
+        running_simulator(tmp_path, dds_domain, *flags) as simulator,
+    ):
+        names = {f"site_b/sim{index}" for index in range(1, 5)}
+        wait_for(
+            lambda: (
+                {robot["robot"] for robot in exporter.get_json("/api/v1/robots")["robots"]} == names
+                and all(len(components(exporter, name)) == 15 for name in names)
+            ),  # 10 leaves, 5 groups
+            45,
+            message="the simulated fleet",
+        )
+        wait_for(lambda: not exporter.robot("site_b/sim2")["up"], 20, message="the stopped robot down")
+        assert exporter.robot("site_b/sim2")["publisher_alive"] is False  # left the graph: down at once
+    assert f"ROS 2 domain {dds_domain} through rclpy ({qos})" in simulator.log()
