@@ -16,6 +16,7 @@ BENCHMARKS = (
     "bench.bench_ingest",
     "bench.bench_fleet",
     "bench.bench_zenoh",
+    "bench.bench_ros2",
     "bench.bench_live_values",
     "bench.bench_scrape",
     "bench.bench_memory",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -11,13 +12,20 @@ SIMULATOR_ROBOTS = 2500  # one Python process cannot build and send more arrays 
 
 
 def start_publishers(
-    robots: int, components: int, seconds: float, transport_args: Sequence[str], vary_values: str
+    robots: int,
+    components: int,
+    seconds: float,
+    transport_args: Sequence[str],
+    vary_values: str,
+    per_process: int = SIMULATOR_ROBOTS,
+    env: dict[str, str] | None = None,
 ) -> list[subprocess.Popen[str]]:
     """Start publishing `robots` x `components` at 1 Hz for `seconds`, once every robot has a subscriber.
 
-    Robots are named `s<process>/robot<n>`; `transport_args` choose DDS or Zenoh and their endpoints.
+    Robots are named `s<process>/robot<n>`, `per_process` a process; `transport_args` choose DDS, Zenoh or
+    ROS 2 and their endpoints; `env` adds to the publishers' environment.
     """
-    shares = [min(SIMULATOR_ROBOTS, robots - first) for first in range(0, robots, SIMULATOR_ROBOTS)]
+    shares = [min(per_process, robots - first) for first in range(0, robots, per_process)]
     return [
         subprocess.Popen(
             [
@@ -39,6 +47,7 @@ def start_publishers(
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
+            env={**os.environ, **(env or {})},
         )
         for index, share in enumerate(shares)
     ]

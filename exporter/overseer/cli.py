@@ -333,6 +333,13 @@ def _add_simulator_flags(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="before publishing, wait up to SECONDS until every robot has a subscriber (benchmarks)",
     )
+    parser.add_argument(
+        "--subscribers",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --wait-for-subscribers: wait for N subscribers of each robot (exporters compared)",
+    )
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     parser.add_argument(
         "--event",
@@ -506,6 +513,7 @@ def _simulator_settings(args: argparse.Namespace) -> Any:
         peers=peers,
         vary_values=args.vary_values,
         wait_for_subscribers=args.wait_for_subscribers,
+        subscribers=args.subscribers,
         events=events,
     )
 

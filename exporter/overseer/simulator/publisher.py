@@ -136,6 +136,7 @@ class SimulatorSettings:
         "none"  # "battery": one voltage per robot changes at every publication; "all": every status
     )
     wait_for_subscribers: float = 0.0  # seconds to wait until every writer has a matched reader
+    subscribers: int = 1  # how many readers each writer waits for (several exporters compared)
     events: list[Event] = field(default_factory=list)
 
 
@@ -202,7 +203,8 @@ class FleetSimulator:
         """Wait until every robot's writer has a matched reader; False when `timeout` passed first."""
         deadline = time.monotonic() + timeout
         while not self._stop.is_set() and time.monotonic() < deadline:
-            if all(writer.get_matched_subscriptions() for writer in self._writers.values()):
+            wanted = self.settings.subscribers
+            if all(len(writer.get_matched_subscriptions()) >= wanted for writer in self._writers.values()):
                 return True
             self._stop.wait(0.1)
         log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)

@@ -71,7 +71,8 @@ class Ros2FleetSimulator(FleetSimulator):
         """Wait until every robot's publisher has a subscription; False when `timeout` passed first."""
         deadline = time.monotonic() + timeout
         while not self._stop.is_set() and time.monotonic() < deadline:
-            if all(publisher.get_subscription_count() for publisher in self._publishers.values()):
+            wanted = self.settings.subscribers
+            if all(publisher.get_subscription_count() >= wanted for publisher in self._publishers.values()):
                 return True
             self._stop.wait(0.1)
         log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)
