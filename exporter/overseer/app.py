@@ -29,6 +29,7 @@ from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
 from overseer.serve.web_config import load_web_config
 from overseer.sources import enabled_transports
+from overseer.sources.ros2 import require_rclpy
 
 if TYPE_CHECKING:
     from overseer.push.ros2_fleet import FleetDiagnosticsPublisher
@@ -64,6 +65,7 @@ class Exporter:
             self.icinga2_push = Icinga2Push(config.icinga2, self.fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
         if config.ros2.enabled and config.ros2.fleet_topic is not None:
+            require_rclpy("ros2.enabled (--ros2)")
             from overseer.push.ros2_fleet import FleetDiagnosticsPublisher  # rclpy only with --ros2
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)

@@ -529,6 +529,9 @@ def _simulate(args: argparse.Namespace) -> int:
         elif args.transport == "zenoh":
             simulator = _zenoh_simulator(args, settings)
         else:
+            from overseer.sources.ros2 import require_rclpy
+
+            require_rclpy("--transport ros2")
             from overseer.simulator.ros2_publisher import Ros2FleetSimulator
 
             simulator = Ros2FleetSimulator(settings, best_effort=args.ros2_qos == "best_effort")

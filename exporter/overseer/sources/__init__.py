@@ -50,6 +50,9 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
 
         sources.append(ZenohSource(config.zenoh, model, config.shard))
     if config.ros2.enabled:
+        from overseer.sources.ros2 import require_rclpy
+
+        require_rclpy("ros2.enabled (--ros2)")
         from overseer.sources.ros2.source import Ros2Source, node_name
 
         name = node_name(config.ros2, config.shard.worker, config.shard.workers)
