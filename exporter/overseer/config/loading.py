@@ -13,12 +13,27 @@ from typing import Any
 
 import yaml
 
-from overseer.config import dds, events, fleet, icinga2, ingest, metrics, ros1, ros2, web, zenoh
+from overseer.config import (
+    alertmanager,
+    dds,
+    events,
+    fleet,
+    icinga2,
+    ingest,
+    maintenance,
+    metrics,
+    ros1,
+    ros2,
+    web,
+    zenoh,
+)
+from overseer.config.alertmanager import AlertmanagerConfig
 from overseer.config.dds import DdsConfig
 from overseer.config.errors import ConfigError
 from overseer.config.events import EventsConfig
 from overseer.config.icinga2 import Icinga2Config
 from overseer.config.ingest import IngestConfig
+from overseer.config.maintenance import MaintenanceConfig
 from overseer.config.metrics import MetricsConfig
 from overseer.config.parsers import first_line, reject_unknown, section, string
 from overseer.config.ros1 import Ros1Config
@@ -31,8 +46,8 @@ from overseer.model.shard import Shard
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
-_SECTIONS = {"web", "dds", "ros1", "zenoh", "ros2", "fleet", "metrics", "ingest", "events"}
-_TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2"}
+_SECTIONS = {"web", "dds", "ros1", "zenoh", "ros2", "fleet", "metrics", "ingest", "events", "maintenance"}
+_TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2", "alertmanager"}
 
 
 @dataclass(frozen=True)
@@ -52,6 +67,8 @@ class Config:
     events: EventsConfig = field(default_factory=EventsConfig)
     log_format: str = "text"
     icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
+    maintenance: MaintenanceConfig = field(default_factory=MaintenanceConfig)
+    alertmanager: AlertmanagerConfig | None = None  # silences for maintenance windows when set
     origins: tuple[Origin, ...] = ()  # where the ROS settings came from (flag, file, ROS_* variable)
 
 
@@ -111,6 +128,10 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         log_level=_choice(raw, "log_level", LOG_LEVELS, "info"),
         log_format=_choice(raw, "log_format", LOG_FORMATS, "text"),
         icinga2=None if raw.get("icinga2") is None else icinga2.icinga2_config(raw["icinga2"]),
+        maintenance=maintenance.maintenance_config(section(raw, "maintenance", maintenance.KEYS)),
+        alertmanager=None
+        if raw.get("alertmanager") is None
+        else alertmanager.alertmanager_config(section(raw, "alertmanager", alertmanager.KEYS)),
     )
     shared = {domain.id for domain in config.dds.domains} & {config.ros2.domain}
     if config.dds.enabled and config.ros2.enabled and shared:

@@ -8,8 +8,26 @@ from typing import Any, Literal
 
 from overseer.levels import Level
 
-EventKind = Literal["level", "robot_down", "robot_up", "appeared", "missing", "expired"]
-EVENT_KINDS: tuple[EventKind, ...] = ("level", "robot_down", "robot_up", "appeared", "missing", "expired")
+EventKind = Literal[
+    "level",
+    "robot_down",
+    "robot_up",
+    "appeared",
+    "missing",
+    "expired",
+    "maintenance_start",
+    "maintenance_end",
+]
+EVENT_KINDS: tuple[EventKind, ...] = (
+    "level",
+    "robot_down",
+    "robot_up",
+    "appeared",
+    "missing",
+    "expired",
+    "maintenance_start",
+    "maintenance_end",
+)
 _LEVEL_NAMES = {level: level.name for level in Level}
 
 

@@ -1,0 +1,55 @@
+"""The `alertmanager:` section: the Alertmanager the exporter opens silences in for maintenance windows."""
+
+from __future__ import annotations
+
+import re
+import ssl
+from dataclasses import dataclass
+from typing import Any
+
+from overseer.config.errors import ConfigError
+from overseer.config.parsers import parse_duration, read_text_file, reject_unknown, string
+
+KEYS = {"url", "username", "password_file", "ca_file", "timeout"}
+_URL = re.compile(r"https?://[^/\s?#]+(/[^\s?#]*)?")
+
+
+@dataclass(frozen=True)
+class AlertmanagerConfig:
+    """Where Alertmanager's API v2 is, and how to reach it (basic auth, a CA for https)."""
+
+    url: str
+    username: str = ""
+    password: str = ""
+    ca_file: str = ""
+    timeout: float = 10.0
+
+    def __repr__(self) -> str:
+        """Everything but the password."""
+        return f"AlertmanagerConfig(url={self.url!r}, username={self.username!r})"
+
+
+def alertmanager_config(raw: dict[str, Any]) -> AlertmanagerConfig:
+    """The section from its mapping."""
+    reject_unknown(raw, "alertmanager.", KEYS)
+    url = string(raw.get("url"), "alertmanager.url")
+    if not _URL.fullmatch(url):
+        raise ConfigError(f"alertmanager.url: expected http(s)://HOST[:PORT][/PATH], got {url!r}")
+    username = string(raw["username"], "alertmanager.username") if "username" in raw else ""
+    password = ""
+    if "password_file" in raw:
+        if not username:
+            raise ConfigError("alertmanager.username: required with alertmanager.password_file")
+        path = string(raw["password_file"], "alertmanager.password_file")
+        text = read_text_file(path, "alertmanager.password_file")
+        password = text.splitlines()[0] if text else ""
+        if not password:
+            raise ConfigError(f"alertmanager.password_file: {path!r} is empty")
+    ca_file = string(raw["ca_file"], "alertmanager.ca_file") if "ca_file" in raw else ""
+    if ca_file:
+        try:
+            ssl.create_default_context(cafile=ca_file)
+        except (ssl.SSLError, OSError) as error:
+            raise ConfigError(f"alertmanager.ca_file: cannot use {ca_file!r}: {error}") from None
+    timeout = parse_duration(raw["timeout"], "alertmanager.timeout") if "timeout" in raw else 10.0
+    return AlertmanagerConfig(url.rstrip("/"), username, password, ca_file, timeout)
