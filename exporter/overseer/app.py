@@ -21,12 +21,16 @@ from overseer.fleet.local import LocalFleet
 from overseer.fleet.pooled import PooledFleet
 from overseer.history.api import EVENTS_PATH, events_route
 from overseer.history.service import EventHistory
+from overseer.maintenance.metrics import MaintenanceCollector
+from overseer.maintenance.schedule import MaintenanceSchedule, open_schedule
 from overseer.model import FleetModel
 from overseer.model.events import EventSink
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import Icinga2Push
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
+from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
+from overseer.serve.routes import JsonRoute
 from overseer.serve.web_config import load_web_config
 from overseer.sources import enabled_transports
 from overseer.sources.ros2 import require_rclpy
@@ -49,6 +53,7 @@ class Exporter:
     config: Config
     fleet: Fleet = field(init=False)
     server: OverseerServer = field(init=False)
+    maintenance: MaintenanceSchedule = field(init=False)
     history: EventHistory | None = None
     icinga2_push: Icinga2Push | None = None
     ros2_fleet: FleetDiagnosticsPublisher | None = None
@@ -57,10 +62,13 @@ class Exporter:
         config = self.config
         if config.events.enabled:
             self.history = EventHistory(config.events, config.log_format == "json")
-        self.fleet = open_fleet(config, None if self.history is None else self.history.store.add)
+        events = None if self.history is None else self.history.store.add
+        self.fleet = open_fleet(config, events)
+        self.maintenance = open_schedule(config.maintenance, config.events.path, events)
         # Appended to /metrics after the fleet's series, in this order.
         extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
         extra_collectors += self.fleet.collectors()
+        extra_collectors.append(MaintenanceCollector(self.maintenance, self.robot_names))
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(config.icinga2, self.fleet, config.fleet.expire_after)
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
@@ -71,10 +79,30 @@ class Exporter:
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
         security = load_web_config(config.web.config_file)
-        events = events_route(None if self.history is None else self.history.store)
-        self.server = OverseerServer(
-            config.web.host_and_port, self.fleet, assembler, security, routes={EVENTS_PATH: events}
+        answer_events = events_route(None if self.history is None else self.history.store)
+        maintenance_api = MaintenanceApi(
+            self.maintenance, config.maintenance.writers, config.web.enable_maintenance_api
         )
+        routes: dict[str, JsonRoute] = {
+            EVENTS_PATH: lambda request: (
+                answer_events(request.query)
+                if request.method in ("GET", "HEAD")
+                else (405, {"error": f"{request.method} is not answered at {EVENTS_PATH}; GET it"})
+            ),
+            MAINTENANCE_PATH: maintenance_api.answer,
+        }
+        self.server = OverseerServer(
+            config.web.host_and_port,
+            self.fleet,
+            assembler,
+            security,
+            routes=routes,
+            robot_documents=maintenance_api.with_maintenance,
+        )
+
+    def robot_names(self) -> list[str]:
+        """The names of the robots the fleet follows now."""
+        return [robot["robot"] for robot in self.fleet.robots_document()["robots"]]
 
     @property
     def model(self) -> FleetModel | None:
@@ -88,10 +116,12 @@ class Exporter:
         """
         if self.history is not None:
             self.history.start()
+        self.maintenance.start()
         try:
             self.fleet.start()
         except Exception:
             self.server.server_close()
+            self.maintenance.stop()
             if self.history is not None:
                 self.history.stop()
             raise
@@ -119,5 +149,6 @@ class Exporter:
         self.server.shutdown()
         self.server.server_close()
         self.fleet.stop()
+        self.maintenance.stop()
         if self.history is not None:
             self.history.stop()

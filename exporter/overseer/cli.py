@@ -144,6 +144,13 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
         help="the URL users reach this exporter at, for links to the status page in alerts",
     )
     parser.add_argument(
+        "--web.enable-maintenance-api",
+        dest="enable_maintenance_api",
+        action="store_true",
+        help="let the users of maintenance.writers open and end maintenance windows (POST, DELETE "
+        "/api/v1/maintenance); reading is always on",
+    )
+    parser.add_argument(
         "--dds.disabled",
         dest="dds_disabled",
         action="store_true",
@@ -371,6 +378,8 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["ros1.robots"] = _ros1_robot_overrides(args.ros1_robots or [], args.ros_masters or [])
     if args.external_url is not None:
         overrides["web.external_url"] = args.external_url
+    if args.enable_maintenance_api:
+        overrides["web.enable_maintenance_api"] = True
     for name in ("stale_after", "robot_timeout", "expire_after"):
         value = getattr(args, name)
         if value is not None:

@@ -172,7 +172,7 @@ def plugin_output(verdict: Verdict, verbosity: int = 0) -> str:
 def down_text(robot: Robot) -> str:
     """Why a robot is down: its publisher left, silent for how long, or never heard from."""
     if not robot.publisher_alive:
-        return "its diagnostics publisher left (the middleware's liveliness says so)"
+        return "its diagnostics publisher left (the middleware said so)"
     if robot.last_message is None:
         return "the exporter knows it but never received its diagnostics"
     silent_seconds = max(0, round(robot.generated_at - robot.last_message))

@@ -18,6 +18,7 @@ import pytest
 
 from overseer.app import Exporter
 from overseer.config import config_from_dict
+from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.sources import enabled_transports
@@ -195,7 +196,8 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
         publish(running, "robot1", (2, "/a", "bad"), (1, "/b", "warm"))
         assert running.model is not None and running.history is not None
         oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
-        registry = oracle_registry(oracle, running.history.collector)
+        maintenance = MaintenanceCollector(running.maintenance, running.robot_names)
+        registry = oracle_registry(oracle, running.history.collector, maintenance)
         assembler, fleet = running.server.assembler, running.fleet
         for fmt in (TEXT, OPENMETRICS):
             fast = assembler.assemble(fleet.exposition_parts(), fmt)

@@ -7,10 +7,10 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from overseer.config.errors import ConfigError
-from overseer.config.parsers import string
+from overseer.config.parsers import boolean, string
 
 DEFAULT_PORT = 9849
-KEYS = {"listen_address", "config_file", "external_url"}
+KEYS = {"listen_address", "config_file", "external_url", "enable_maintenance_api"}
 
 
 @dataclass(frozen=True)
@@ -20,6 +20,7 @@ class WebConfig:
     listen_address: str = f":{DEFAULT_PORT}"
     config_file: str | None = None
     external_url: str | None = None  # the URL users reach us at, for links in alerts (no trailing /)
+    enable_maintenance_api: bool = False  # POST and DELETE /api/v1/maintenance, for maintenance.writers
 
     @property
     def host_and_port(self) -> tuple[str, int]:
@@ -46,6 +47,9 @@ def web_config(raw: dict[str, Any]) -> WebConfig:
         config = replace(config, config_file=string(raw["config_file"], "web.config_file"))
     if raw.get("external_url") is not None:
         config = replace(config, external_url=_external_url(raw["external_url"]))
+    if "enable_maintenance_api" in raw:
+        enabled = boolean(raw["enable_maintenance_api"], "web.enable_maintenance_api")
+        config = replace(config, enable_maintenance_api=enabled)
     return config
 
 

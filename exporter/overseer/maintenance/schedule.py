@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from overseer.config.maintenance import MaintenanceConfig
-from overseer.maintenance.store import WindowStore
+from overseer.maintenance.store import StoreUnavailable, WindowStore
 from overseer.model.events import Event, EventKind, EventSink
 from overseer.model.maintenance import RobotSelector, Window
 
@@ -57,7 +57,7 @@ class MaintenanceSchedule:
         self.config = config
         self.store = store
         self._events = events
-        self._clock = clock
+        self.clock = clock
         self._lock = threading.Lock()
         self._memory: list[Window] = []  # one-off windows when there is no store
         self._next_memory_id = 1
@@ -102,7 +102,7 @@ class MaintenanceSchedule:
         self, robots: RobotSelector, start: float | None, end: float, comment: str, author: str
     ) -> Window:
         """A new one-off window for `robots` from `start` (None: now) to `end`; `WindowError` if invalid."""
-        now = self._clock()
+        now = self.clock()
         begins = now if start is None or now - PAST_TOLERANCE_SECONDS <= start <= now else start
         if not math.isfinite(begins) or begins < now - PAST_TOLERANCE_SECONDS:
             raise WindowError("start: must not be in the past")
@@ -142,7 +142,7 @@ class MaintenanceSchedule:
 
     def end(self, key: str, author: str) -> Window:
         """End one-off window `key` now; `KeyError` for no such window, `WindowError` when it cannot end."""
-        now = self._clock()
+        now = self.clock()
         window = next((window for window in self.windows(now) if window.key == key), None)
         if window is None:
             raise KeyError(key)
@@ -167,7 +167,7 @@ class MaintenanceSchedule:
 
     def check(self, now: float | None = None) -> None:
         """Tell the windows that started or ended since the last check."""
-        now = self._clock() if now is None else now
+        now = self.clock() if now is None else now
         events = []
         with self._lock:
             for window in self._windows(now):
@@ -195,6 +195,16 @@ class MaintenanceSchedule:
                 self.check()
             except Exception:  # a bug here must not end the windows' events for good
                 log.exception("maintenance check failed")
+
+
+def open_schedule(config: MaintenanceConfig, path: str, events: EventSink | None) -> MaintenanceSchedule:
+    """The exporter's schedule, its windows kept in the SQLite file at `path` (in memory if it cannot be)."""
+    try:
+        store: WindowStore | None = WindowStore(path)
+    except StoreUnavailable as error:
+        log.error("%s; maintenance windows opened now are kept in memory only, until a restart", error)
+        store = None
+    return MaintenanceSchedule(config, store, events)
 
 
 def _event(window: Window, kind: EventKind, at: float) -> Event:

@@ -1,8 +1,9 @@
 """One-off maintenance windows on disk, in the exporter's SQLite database, so they survive restarts.
 
 The windows live in the event history's file (`events.path`) in tables of their own, beside the events,
-whether the history is enabled or not. So does what the outputs made of each window elsewhere (an
-Alertmanager silence's id, an Icinga 2 downtime's name), so that a restarted exporter finds and ends them.
+whether the history is enabled or not; the file is made when the first window is, not before. So is
+what the outputs made of each window elsewhere (an Alertmanager silence's id, an Icinga 2 downtime's
+name), so that a restarted exporter finds and ends them.
 """
 
 from __future__ import annotations
@@ -44,34 +45,24 @@ class WindowStore:
     """The one-off windows and their effects, read and written under one lock."""
 
     def __init__(self, path: str) -> None:
-        """Open (or create) the tables in the SQLite file at `path`; `StoreUnavailable` when it cannot."""
+        """Use the SQLite file at `path` (made with the first window); `StoreUnavailable` if it cannot be."""
         self.path = path
         self._lock = threading.Lock()
-        try:
-            if not Path(path).parent.is_dir():
-                raise OSError(f"directory {str(Path(path).parent)!r} does not exist")
-            self._connection = sqlite3.connect(
-                path, timeout=5.0, isolation_level=None, check_same_thread=False
+        self._connection: sqlite3.Connection | None = None
+        directory = Path(path).parent
+        if not directory.is_dir():
+            raise StoreUnavailable(
+                f"cannot keep maintenance windows in {path!r}: directory {str(directory)!r} does not exist"
             )
-            tables = {
-                row[0]
-                for row in self._connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
-            }
-            if tables and self._connection.execute("PRAGMA application_id").fetchone()[0] != APPLICATION_ID:
-                raise sqlite3.DatabaseError("it is an SQLite database, but not Overseer's")
-            if not tables:
-                self._connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
-            self._connection.execute("PRAGMA journal_mode = WAL")
-            self._connection.executescript(_SCHEMA)
-        except (OSError, sqlite3.Error) as error:
-            raise StoreUnavailable(f"cannot keep maintenance windows in {path!r}: {error}") from None
+        if Path(path).exists():
+            self._connect()
 
     def add(
         self, robots: RobotSelector, start: float, end: float, comment: str, author: str, now: float
     ) -> Window:
         """Store a new window; it comes back with its key."""
         with self._lock:
-            cursor = self._connection.execute(
+            cursor = self._connect().execute(
                 "INSERT INTO maintenance_windows (robots, starts_at, ends_at, comment, author, created_at) "
                 "VALUES (?, ?, ?, ?, ?, ?)",
                 (robots.text, start, end, comment, author, now),
@@ -81,13 +72,15 @@ class WindowStore:
     def end_early(self, key: str, at: float) -> None:
         """Record that window `key` ended at `at`."""
         with self._lock:
-            self._connection.execute(
+            self._connect().execute(
                 "UPDATE maintenance_windows SET ended_at = ? WHERE id = ?", (at, int(key.removeprefix("w")))
             )
 
     def windows(self, ending_after: float) -> list[Window]:
         """The one-off windows that end (or ended) after `ending_after`, oldest first."""
         with self._lock:
+            if self._connection is None:
+                return []  # no window was ever made here
             rows = self._connection.execute(
                 "SELECT id, robots, starts_at, ends_at, comment, author, ended_at FROM maintenance_windows "
                 "WHERE MIN(ends_at, COALESCE(ended_at, ends_at)) > ? ORDER BY id",
@@ -101,6 +94,8 @@ class WindowStore:
     def effects(self, target: str) -> dict[tuple[str, str], str]:
         """(window key, subject) → reference of every effect kept for `target`."""
         with self._lock:
+            if self._connection is None:
+                return {}
             rows = self._connection.execute(
                 "SELECT window, subject, reference FROM maintenance_effects WHERE target = ?", (target,)
             ).fetchall()
@@ -109,7 +104,7 @@ class WindowStore:
     def keep_effect(self, window: str, target: str, subject: str, reference: str) -> None:
         """Remember what `target` made of a window (for `subject`)."""
         with self._lock:
-            self._connection.execute(
+            self._connect().execute(
                 "INSERT OR REPLACE INTO maintenance_effects VALUES (?, ?, ?, ?)",
                 (window, target, subject, reference),
             )
@@ -117,12 +112,41 @@ class WindowStore:
     def forget_effect(self, window: str, target: str, subject: str) -> None:
         """The effect is gone (ended, expired): forget it."""
         with self._lock:
-            self._connection.execute(
-                "DELETE FROM maintenance_effects WHERE window = ? AND target = ? AND subject = ?",
-                (window, target, subject),
-            )
+            if self._connection is not None:
+                self._connection.execute(
+                    "DELETE FROM maintenance_effects WHERE window = ? AND target = ? AND subject = ?",
+                    (window, target, subject),
+                )
 
     def close(self) -> None:
         """Close the database."""
         with self._lock:
-            self._connection.close()
+            if self._connection is not None:
+                self._connection.close()
+                self._connection = None
+
+    def _connect(self) -> sqlite3.Connection:
+        """The connection; the file and its tables are made on first use (or `StoreUnavailable`)."""
+        if self._connection is not None:
+            return self._connection
+        try:
+            connection = sqlite3.connect(
+                self.path, timeout=5.0, isolation_level=None, check_same_thread=False
+            )
+            try:
+                tables = {
+                    row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type='table'")
+                }
+                if tables and connection.execute("PRAGMA application_id").fetchone()[0] != APPLICATION_ID:
+                    raise sqlite3.DatabaseError("it is an SQLite database, but not Overseer's")
+                if not tables:
+                    connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                connection.execute("PRAGMA journal_mode = WAL")
+                connection.executescript(_SCHEMA)
+            except BaseException:
+                connection.close()
+                raise
+        except (OSError, sqlite3.Error) as error:
+            raise StoreUnavailable(f"cannot keep maintenance windows in {self.path!r}: {error}") from None
+        self._connection = connection
+        return connection

@@ -29,6 +29,7 @@ from overseer.fleet.interface import Fleet, FleetPartUnavailable
 from overseer.serve.api_query import ComponentQueryError, parse_component_query
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
+from overseer.serve.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
@@ -39,8 +40,6 @@ log = logging.getLogger(__name__)
 
 ROBOTS_PATH = "/api/v1/robots"
 COMPONENTS_PATH = "/api/v1/components"
-# A JSON path served for another output (the event history): its answer to a GET's query string.
-JsonRoute = Callable[[str], tuple[int, dict[str, Any]]]
 MAX_CONNECTIONS = 128
 MAX_CONCURRENT_REQUESTS = 16
 REQUEST_TIMEOUT_SECONDS = 10.0
@@ -65,16 +64,20 @@ class OverseerServer(ThreadingHTTPServer):
         assembler: ExpositionAssembler,
         security: WebSecurity | None = None,
         routes: Mapping[str, JsonRoute] | None = None,
+        robot_documents: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
     ) -> None:
         """Serve `fleet` on `address` ('' host for every interface; IPv6 when the host has a colon).
 
-        `/metrics` is written by `assembler`; `routes` are JSON paths of other outputs (the events).
+        `/metrics` is written by `assembler`; `routes` are JSON paths of other outputs (the events, the
+        maintenance windows), each answering its path and those below it; `robot_documents` adds to the
+        robots' documents what other outputs know of them (their maintenance).
         """
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
         self.fleet = fleet
         self.assembler = assembler
         self.routes = dict(routes or {})
+        self.robot_documents = robot_documents or (lambda document: document)
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -232,6 +235,12 @@ class _Handler(BaseHTTPRequestHandler):
     def do_HEAD(self) -> None:
         self._serve(head_only=True)
 
+    def do_POST(self) -> None:
+        self._serve(head_only=False)
+
+    def do_DELETE(self) -> None:
+        self._serve(head_only=False)
+
     def _serve(self, head_only: bool) -> None:
         if not self.server.slots.acquire(timeout=REQUEST_TIMEOUT_SECONDS):
             self._send(503, b"too many concurrent requests\n", "text/plain; charset=utf-8", head_only)
@@ -251,12 +260,17 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _route(self, head_only: bool) -> None:
         path = urlsplit(self.path).path
-        if path == "/metrics":
+        route = self._json_route(path)
+        if route is not None:
+            self._answer_route(*route, head_only)
+        elif self.command not in ("GET", "HEAD"):
+            self._json(405, {"error": f"{self.command} is not answered at {path!r}"}, head_only)
+        elif path == "/metrics":
             self._metrics(head_only)
         elif path == "/-/healthy" or path == "/-/ready":
             self._send(200, b"OK\n", "text/plain; charset=utf-8", head_only)
         elif path == ROBOTS_PATH or path == ROBOTS_PATH + "/":
-            self._json(200, self.server.fleet.robots_document(), head_only)
+            self._json(200, self.server.robot_documents(self.server.fleet.robots_document()), head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
         elif path == COMPONENTS_PATH:
@@ -266,9 +280,6 @@ class _Handler(BaseHTTPRequestHandler):
             self._send(
                 200, page_file.body, page_file.content_type, head_only, compressible=True, extra=PAGE_HEADERS
             )
-        elif path in self.server.routes:
-            status, document = self.server.routes[path](urlsplit(self.path).query)
-            self._json(status, document, head_only)
         elif path in ("/", "/index.html"):
             self._send(
                 200, self.server.status_page, "text/html; charset=utf-8", head_only, extra=PAGE_HEADERS
@@ -281,7 +292,36 @@ class _Handler(BaseHTTPRequestHandler):
         if document is None:
             self._json(404, {"error": f"unknown robot {name!r}"}, head_only)
         else:
-            self._json(200, document, head_only)
+            self._json(200, self.server.robot_documents(document), head_only)
+
+    def _json_route(self, path: str) -> tuple[JsonRoute, str] | None:
+        """The route answering `path` and what of the path is past its own."""
+        for prefix, route in self.server.routes.items():
+            if path == prefix or path.startswith(prefix + "/"):
+                return route, unquote(path[len(prefix) + 1 :])
+        return None
+
+    def _answer_route(self, route: JsonRoute, rest: str, head_only: bool) -> None:
+        length_text = self.headers.get("Content-Length", "0")
+        if not length_text.isdigit():
+            self._json(400, {"error": "Content-Length: expected a number of bytes"}, head_only)
+            return
+        length = int(length_text)
+        if length > MAX_BODY_BYTES:
+            self.close_connection = True  # the body is left unread
+            self._json(413, {"error": f"body: at most {MAX_BODY_BYTES} bytes"}, head_only)
+            return
+        body = self.rfile.read(length) if length else b""
+        request = ApiRequest(
+            self.command,
+            rest,
+            urlsplit(self.path).query,
+            body,
+            self.server.security.user(self.headers.get("Authorization")),
+            dict(self.headers.items()),
+        )
+        status, document = route(request)
+        self._json(status, document, head_only)
 
     def _components(self, head_only: bool) -> None:
         try:

@@ -78,6 +78,11 @@ class BasicAuth:
         self._verified: dict[str, bytes] = {}  # at most one digest per configured user
         self._lock = threading.Lock()
 
+    def user(self, header: str | None) -> str | None:
+        """The configured user whose password `header` carries, or None."""
+        credentials = _basic_credentials(header)
+        return credentials[0] if credentials is not None and self.check(header) else None
+
     def check(self, header: str | None) -> bool:
         """True when `header` (an Authorization header's value) carries a configured user's password."""
         credentials = _basic_credentials(header)
@@ -110,6 +115,10 @@ class WebSecurity:
     def authorized(self, header: str | None) -> bool:
         """True when no basic auth is configured or `header` carries valid credentials."""
         return self.basic_auth is None or self.basic_auth.check(header)
+
+    def user(self, header: str | None) -> str | None:
+        """The basic-auth user `header` proves to be, or None (no basic auth configured, or no valid user)."""
+        return None if self.basic_auth is None else self.basic_auth.user(header)
 
 
 def load_web_config(path: str | Path | None) -> WebSecurity:
