@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import re
 import urllib.error
 import urllib.request
 from base64 import b64encode
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote, urlencode
@@ -17,54 +14,20 @@ import bcrypt
 import pytest
 
 from overseer.app import Exporter
-from overseer.config import config_from_dict
 from overseer.maintenance.metrics import MaintenanceCollector
-from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.sources import enabled_transports
 from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
-from testbed.ports import free_port
+from testbed.in_process import call, in_process_exporter, publish
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "</script><b>", "tab\there", "\u2028sep"]
 
 
-@contextmanager
-def exporter(tmp_path: Path, **sections: Any) -> Iterator[Exporter]:
-    """An exporter with no transport, serving on loopback, its event database in `tmp_path`."""
-    raw: dict[str, Any] = {
-        "dds": {"enabled": False},
-        "web": {"listen_address": f"127.0.0.1:{free_port()}"},
-        "events": {"path": str(tmp_path / "events.db")},
-        "ingest": {"workers": 1},  # the tests feed the in-process model
-    }
-    for name, section in sections.items():
-        raw[name] = {**raw.get(name, {}), **section}
-    running = Exporter(config_from_dict(raw))
-    running.start()
-    try:
-        yield running
-    finally:
-        running.stop()
-
-
-def publish(running: Exporter, robot: str, *statuses: tuple[int, str, str]) -> None:
-    array = DiagnosticArray(
-        0, 0, "", tuple(DiagnosticStatus(lv, n, m, "hw", (("k", m),)) for lv, n, m in statuses)
-    )
-    assert running.model is not None
-    running.model.apply(robot, array, "dds")
-    assert running.history is not None
-    running.history.store.flush()
+exporter = in_process_exporter
 
 
 def get(running: Exporter, path: str, headers: dict[str, str] | None = None) -> tuple[int, Any]:
-    request = urllib.request.Request(running.server.url + path, headers=headers or {})
-    try:
-        with urllib.request.urlopen(request, timeout=5) as response:
-            return response.status, json.loads(response.read())
-    except urllib.error.HTTPError as error:
-        body = error.read()
-        return error.code, json.loads(body) if body.startswith(b"{") else body
+    return call(running, path, headers=headers)
 
 
 def test_events_answer_in_the_contracts_shape_newest_first(tmp_path: Path) -> None:

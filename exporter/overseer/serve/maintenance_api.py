@@ -113,7 +113,7 @@ class MaintenanceApi:
             )
         except WindowError as error:
             return 400, {"error": str(error)}
-        return 201, {"window": window.document(now)}
+        return 201, {"window": window.document(max(now, window.start))}
 
     def _end(self, request: ApiRequest) -> tuple[int, dict[str, Any]]:
         key = request.rest
