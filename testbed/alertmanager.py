@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,6 +22,28 @@ EXAMPLE = REPO / "alert_rules" / "alertmanager.example.yml"
 @dataclass
 class Alertmanager(RunningServer):
     """A running Alertmanager."""
+
+    def silences(self) -> list[dict[str, Any]]:
+        """Every silence it holds, with `status.state` active, pending or expired."""
+        with urllib.request.urlopen(self.url + "/api/v2/silences", timeout=10) as response:
+            result: list[dict[str, Any]] = json.load(response)
+            return result
+
+    def post_alerts(self, *labels: dict[str, str]) -> None:
+        """Fire one alert per label set, as Prometheus sends them (for an hour from now)."""
+        ends = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(time.time() + 3600))
+        body = json.dumps([{"labels": item, "endsAt": ends} for item in labels]).encode()
+        headers = {"Content-Type": "application/json"}
+        url = self.url + "/api/v2/alerts"
+        request = urllib.request.Request(url, data=body, method="POST", headers=headers)
+        with urllib.request.urlopen(request, timeout=10):
+            pass
+
+    def expire(self, silence_id: str) -> None:
+        """Expire a silence, as an operator does in its web UI."""
+        request = urllib.request.Request(self.url + f"/api/v2/silence/{silence_id}", method="DELETE")
+        with urllib.request.urlopen(request, timeout=10):
+            pass
 
     def alerts(self) -> list[dict[str, Any]]:
         """Every alert it holds, with `status.state` active or suppressed and `status.inhibitedBy`."""
@@ -49,8 +72,13 @@ def example_config(webhook_url: str, timing: dict[str, str] | None = None) -> di
 
 
 @contextmanager
-def running_alertmanager(tmp_path: Path, config: dict[str, Any]) -> Iterator[Alertmanager]:
-    """Run Debian's `prometheus-alertmanager` on loopback, clustering off, until the block ends."""
+def running_alertmanager(
+    tmp_path: Path, config: dict[str, Any], *flags: str, port: int | None = None
+) -> Iterator[Alertmanager]:
+    """Run Debian's `prometheus-alertmanager` on loopback, clustering off, until the block ends.
+
+    On `port` when given (a restart on the same port and `tmp_path` keeps its silences), else a free one.
+    """
     with running_server(
         tmp_path,
         Alertmanager,
@@ -58,5 +86,7 @@ def running_alertmanager(tmp_path: Path, config: dict[str, Any]) -> Iterator[Ale
         config,
         "--storage.path",
         "--cluster.listen-address=",
+        *flags,
+        port=port,
     ) as alertmanager:
         yield alertmanager

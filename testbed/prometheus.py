@@ -183,14 +183,16 @@ def running_server(
     config: dict[str, Any],
     storage_flag: str,
     *flags: str,
+    port: int | None = None,
 ) -> Iterator[ServerT]:
-    """Run `program` of Prometheus' family on a free loopback port with `config` until the block ends.
+    """Run `program` of Prometheus' family on loopback (on `port`, or a free one) with `config` until the end.
 
-    Its storage goes under `tmp_path` (`storage_flag`); it is ready when GET /-/ready answers.
+    Its storage goes under `tmp_path` (`storage_flag`), kept across runs on the same port; it is ready
+    when GET /-/ready answers.
     """
-    port = free_port()
+    port = free_port() if port is None else port
     directory = tmp_path / f"{program}-{port}"
-    directory.mkdir()
+    directory.mkdir(parents=True, exist_ok=True)
     config_path = directory / f"{program}.yml"
     config_path.write_text(yaml.safe_dump(config), encoding="utf-8")
     args = [

@@ -21,10 +21,12 @@ from overseer.fleet.local import LocalFleet
 from overseer.fleet.pooled import PooledFleet
 from overseer.history.api import EVENTS_PATH, events_route
 from overseer.history.service import EventHistory
+from overseer.maintenance.effects import EffectsCollector, EffectStats
 from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.maintenance.schedule import MaintenanceSchedule, open_schedule
 from overseer.model import FleetModel
 from overseer.model.events import EventSink
+from overseer.push.alertmanager_silences import AlertmanagerSilences
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import Icinga2Push
 from overseer.serve.assembler import ExpositionAssembler
@@ -56,6 +58,7 @@ class Exporter:
     maintenance: MaintenanceSchedule = field(init=False)
     history: EventHistory | None = None
     icinga2_push: Icinga2Push | None = None
+    silences: AlertmanagerSilences | None = None
     ros2_fleet: FleetDiagnosticsPublisher | None = None
 
     def __post_init__(self) -> None:
@@ -69,9 +72,18 @@ class Exporter:
         extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
         extra_collectors += self.fleet.collectors()
         extra_collectors.append(MaintenanceCollector(self.maintenance, self.robot_names))
+        effects: list[EffectStats] = []
         if config.icinga2 is not None:
-            self.icinga2_push = Icinga2Push(config.icinga2, self.fleet, config.fleet.expire_after)
+            self.icinga2_push = Icinga2Push(
+                config.icinga2, self.fleet, config.fleet.expire_after, maintenance=self.maintenance
+            )
             extra_collectors.append(PushCollector(self.icinga2_push.stats))
+            effects.append(self.icinga2_push.downtime_stats)
+        if config.alertmanager is not None:
+            self.silences = AlertmanagerSilences(config.alertmanager, self.maintenance)
+            effects.append(self.silences.stats)
+        if effects:
+            extra_collectors.append(EffectsCollector(effects))
         if config.ros2.enabled and config.ros2.fleet_topic is not None:
             require_rclpy("ros2.enabled (--ros2)")
             from overseer.push.ros2_fleet import FleetDiagnosticsPublisher  # rclpy only with --ros2
@@ -135,6 +147,8 @@ class Exporter:
             log.warning("%s", compiled.describe())
         if self.icinga2_push is not None:
             self.icinga2_push.start()
+        if self.silences is not None:
+            self.silences.start()
         if self.ros2_fleet is not None:
             self.ros2_fleet.start()
 
@@ -144,6 +158,8 @@ class Exporter:
             self.fleet.prepare_stop()
         if self.icinga2_push is not None:
             self.icinga2_push.stop()
+        if self.silences is not None:
+            self.silences.stop()
         if self.ros2_fleet is not None:
             self.ros2_fleet.stop()
         self.server.shutdown()

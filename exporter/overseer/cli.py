@@ -1,4 +1,4 @@
-"""The `overseer` command: `run` the exporter, `simulate` a fleet, or run a `demo` of both on loopback."""
+"""The `overseer` command: `run` the exporter, `simulate` a fleet, a loopback `demo`, `maintenance`."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from overseer.config.events import parse_max_size
 from overseer.config.parsers import parse_duration
 from overseer.config.web import DEFAULT_PORT
 from overseer.log_format import configure_logging
+from overseer.maintenance_command import add_maintenance_parser, run_maintenance
 
 log = logging.getLogger("overseer")
 
@@ -43,7 +44,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    handler: Any = {"run": _run, "simulate": _simulate, "demo": _demo}[args.command]
+    handler: Any = {"run": _run, "simulate": _simulate, "demo": _demo, "maintenance": run_maintenance}[
+        args.command
+    ]
     try:
         return int(handler(args))
     except ConfigError as error:
@@ -71,6 +74,7 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument("--robots", type=int, default=6)
     demo.add_argument("--components", type=int, default=10)
     demo.add_argument("--log.level", dest="log_level", default="info")
+    add_maintenance_parser(commands)
     return parser
 
 

@@ -6,7 +6,7 @@ naming the field. Only the standard library's cheapest modules are used here (th
 
 from __future__ import annotations
 
-from overseer.verdict import Component, Robot
+from overseer.verdict import Component, Maintenance, Robot
 
 
 class CheckError(Exception):
@@ -26,6 +26,25 @@ def robot_from_document(document: object) -> Robot:
         components=[component_from_document(item) for item in list_field(document, "components")],
         # Absent from exporters before Zenoh liveliness: their robots' publishers count as alive.
         publisher_alive="publisher_alive" not in document or flag_field(document, "publisher_alive"),
+        # Absent from exporters before maintenance windows, null for a robot in none.
+        maintenance=maintenance_from_document(document.get("maintenance")),
+    )
+
+
+def maintenance_from_document(document: object) -> Maintenance | None:
+    """The answer's `maintenance` (null or absent: none); CheckError when its fields are wrong."""
+    if document is None:
+        return None
+    if not isinstance(document, dict):
+        raise CheckError("'maintenance' is not a JSON object or null")
+    until = number_field(document, "until")
+    if not 0 <= until < 1e11:
+        raise CheckError(f"'until' of 'maintenance' is not a time: {until!r}")
+    return Maintenance(
+        window=text_field(document, "window"),
+        until=until,
+        author=text_field(document, "author"),
+        comment=text_field(document, "comment"),
     )
 
 

@@ -94,17 +94,25 @@ def quote_path(text: str) -> str:
     return "".join(chr(byte) if byte in _UNRESERVED else f"%{byte:02X}" for byte in text.encode("utf-8"))
 
 
-def get(url: str, timeout: float, authorization: str = "", tls: Tls | None = None) -> Answer:
-    """GET `url` within `timeout` seconds in all; CheckError naming the URL when no HTTP answer comes back.
+def get(
+    url: str,
+    timeout: float,
+    authorization: str = "",
+    tls: Tls | None = None,
+    method: str = "GET",
+    body: bytes | None = None,
+) -> Answer:
+    """GET `url` (or send `method` with a JSON `body`) within `timeout` seconds in all.
 
-    The deadline bounds connecting, sending and every read; only a DNS lookup that hangs can outlast it.
+    CheckError naming the URL when no HTTP answer comes back. The deadline bounds connecting, sending and
+    every read; only a DNS lookup that hangs can outlast it.
     """
     target = parse_url(url)
     deadline = time.monotonic() + timeout
     try:
         stream = connect(target, deadline, tls or Tls())
         try:
-            stream.sendall(request_bytes(target, authorization))
+            stream.sendall(request_bytes(target, authorization, method, body))
             return parse_answer(read_all(stream, deadline), url)
         finally:
             stream.close()
@@ -182,10 +190,13 @@ def file_error(error: OSError) -> str:
     return error.strerror or str(getattr(error, "reason", "") or error)
 
 
-def request_bytes(target: Url, credentials: str) -> bytes:
-    """The HTTP/1.0 GET request for `target`, with basic auth when `credentials` is `user:password`."""
+def request_bytes(target: Url, credentials: str, method: str = "GET", body: bytes | None = None) -> bytes:
+    """The HTTP/1.0 request for `target`, with basic auth when `credentials` is `user:password`.
+
+    A `body` goes as JSON (`Content-Type: application/json`).
+    """
     lines = [
-        f"GET {target.path} HTTP/1.0",
+        f"{method} {target.path} HTTP/1.0",
         f"Host: {target.authority()}",
         "Accept: application/json",
         f"User-Agent: check_ros_diagnostics/{__version__}",
@@ -195,7 +206,9 @@ def request_bytes(target: Url, credentials: str) -> bytes:
 
         token = binascii.b2a_base64(credentials.encode("utf-8"), newline=False).decode("ascii")
         lines.append(f"Authorization: Basic {token}")
-    return ("\r\n".join(lines) + "\r\n\r\n").encode("utf-8")
+    if body is not None:
+        lines += ["Content-Type: application/json", f"Content-Length: {len(body)}"]
+    return ("\r\n".join(lines) + "\r\n\r\n").encode("utf-8") + (body or b"")
 
 
 def read_all(stream: _socket.socket, deadline: float) -> bytes:

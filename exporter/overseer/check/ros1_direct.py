@@ -100,7 +100,7 @@ def _document(robot: str, array: DiagnosticArray, topic: str, limits: FleetLimit
     snapshot = model.snapshot()
     state = snapshot.find(robot)
     assert state is not None  # a fresh model keeps its first robot
-    return robot_document(snapshot, state)
+    return {**robot_document(snapshot, state), "maintenance": None}  # windows are the exporter's
 
 
 class _Attempt:

@@ -10,7 +10,7 @@ from typing import Any
 from overseer.config.errors import ConfigError
 from overseer.config.parsers import parse_duration, read_text_file, reject_unknown, string
 
-KEYS = {"url", "username", "password_file", "ca_file", "timeout"}
+KEYS = {"url", "username", "password_file", "ca_file", "timeout", "resync_interval"}
 _URL = re.compile(r"https?://[^/\s?#]+(/[^\s?#]*)?")
 
 
@@ -23,6 +23,7 @@ class AlertmanagerConfig:
     password: str = ""
     ca_file: str = ""
     timeout: float = 10.0
+    resync_interval: float = 60.0  # how often the silences are compared with what Alertmanager holds
 
     def __repr__(self) -> str:
         """Everything but the password."""
@@ -52,4 +53,9 @@ def alertmanager_config(raw: dict[str, Any]) -> AlertmanagerConfig:
         except (ssl.SSLError, OSError) as error:
             raise ConfigError(f"alertmanager.ca_file: cannot use {ca_file!r}: {error}") from None
     timeout = parse_duration(raw["timeout"], "alertmanager.timeout") if "timeout" in raw else 10.0
-    return AlertmanagerConfig(url.rstrip("/"), username, password, ca_file, timeout)
+    resync = 60.0
+    if "resync_interval" in raw:
+        resync = parse_duration(raw["resync_interval"], "alertmanager.resync_interval")
+        if resync < 1.0:
+            raise ConfigError("alertmanager.resync_interval: at least 1s")
+    return AlertmanagerConfig(url.rstrip("/"), username, password, ca_file, timeout, resync)

@@ -60,6 +60,7 @@ class MaintenanceSchedule:
         self.clock = clock
         self._lock = threading.Lock()
         self._memory: list[Window] = []  # one-off windows when there is no store
+        self._memory_effects: dict[tuple[str, str, str], str] = {}  # and their effects
         self._next_memory_id = 1
         self._started: set[str] = set()
         self._ended: set[str] = set()
@@ -181,6 +182,29 @@ class MaintenanceSchedule:
                 self.revision += 1
         if events and self._events is not None:
             self._events(events)
+
+    def effects(self, target: str) -> dict[tuple[str, str], str]:
+        """(window key, subject) → reference of what `target` (alertmanager, icinga2) made of each window."""
+        if self.store is not None:
+            return self.store.effects(target)
+        with self._lock:
+            return {(w, s): ref for (w, t, s), ref in self._memory_effects.items() if t == target}
+
+    def keep_effect(self, window: str, target: str, subject: str, reference: str) -> None:
+        """Remember what `target` made of `window` for `subject`: `reference` (silence id, downtime names)."""
+        if self.store is not None:
+            self.store.keep_effect(window, target, subject, reference)
+        else:
+            with self._lock:
+                self._memory_effects[window, target, subject] = reference
+
+    def forget_effect(self, window: str, target: str, subject: str) -> None:
+        """The effect is gone (removed, or over by itself)."""
+        if self.store is not None:
+            self.store.forget_effect(window, target, subject)
+        else:
+            with self._lock:
+                self._memory_effects.pop((window, target, subject), None)
 
     def _windows(self, now: float) -> list[Window]:
         """`windows` unsorted, for callers holding the lock."""

@@ -18,11 +18,15 @@ from typing import Any
 
 from overseer.config.icinga2 import Icinga2Config
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
+from overseer.maintenance.effects import EffectStats
+from overseer.maintenance.schedule import MaintenanceSchedule
 from overseer.model import FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
+from overseer.push.icinga2_downtimes import Icinga2Downtimes
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
+from overseer.verdict import Maintenance
 
 log = logging.getLogger(__name__)
 
@@ -45,14 +49,23 @@ class Icinga2Push:
         expire_after: float,
         stats: PushStats | None = None,
         clock: Callable[[], float] = time.monotonic,
+        maintenance: MaintenanceSchedule | None = None,
     ) -> None:
-        """Push `fleet` per `config`; hosts of robots not seen within `expire_after` of start are deleted."""
+        """Push `fleet` per `config`; hosts of robots not seen within `expire_after` of start are deleted.
+
+        With `maintenance`, robots in a maintenance window have their hosts and services in downtime.
+        """
         self._config = config
         self._fleet = fleet
         self._expire_after = expire_after
         self.stats = stats or PushStats()
         self._clock = clock
         self._client = Icinga2Client(config)
+        self.downtime_stats = EffectStats("icinga2")
+        self._downtimes = (
+            None if maintenance is None else Icinga2Downtimes(self._client, maintenance, self.downtime_stats)
+        )
+        self._maintenance = maintenance
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
         self._urgent: dict[tuple[str, str], CheckResult] = {}
@@ -106,9 +119,15 @@ class Icinga2Push:
     def _queue(self, snapshot: FleetSnapshot, now: float) -> None:
         present = set()
         kinds = self._config.services
+        schedule = self._maintenance
+        active = [] if schedule is None else schedule.active(schedule.clock())
         for robot in snapshot.robots:
             present.add(robot.name)
-            signature = robot_signature(snapshot, robot)
+            state = None if schedule is None else schedule.state(robot.name, active)
+            maintenance = (
+                None if state is None else Maintenance(state.window, state.until, state.author, state.comment)
+            )
+            signature = (*robot_signature(snapshot, robot), state)
             changed = signature != self._signatures.get(robot.name)
             if not changed and now < self._due.get(robot.name, 0.0):
                 continue
@@ -124,7 +143,7 @@ class Icinga2Push:
                     for service in self._created.get(host, ())
                     if service.startswith(GROUP_SERVICE_PREFIX)
                 )
-            for result in robot_results(snapshot, robot, kinds, sorted(groups)):
+            for result in robot_results(snapshot, robot, kinds, sorted(groups), maintenance):
                 self._pending.pop(result.key, None)
                 if result.key not in self._urgent:
                     target[result.key] = result
@@ -149,6 +168,9 @@ class Icinga2Push:
             if self._created is None:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
+            if self._downtimes is not None and self._downtimes.due(self._created):
+                # Before the results: a robot put in maintenance is in downtime when its DOWN arrives.
+                self._downtimes.sync(self._robot_hosts, self._created)
             attempted = 0
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):

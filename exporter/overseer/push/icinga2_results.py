@@ -18,7 +18,16 @@ from overseer.push.icinga2_names import (
     group_service_name,
     host_name,
 )
-from overseer.verdict import Component, Robot, Settings, Verdict, down_text, judge
+from overseer.verdict import (
+    Component,
+    Maintenance,
+    Robot,
+    Settings,
+    Verdict,
+    down_text,
+    judge,
+    maintenance_text,
+)
 
 HOST_UP, HOST_DOWN = 0, 1
 
@@ -51,27 +60,27 @@ def robot_groups(robot: RobotState) -> list[str]:
 
 
 def robot_results(
-    snapshot: FleetSnapshot, robot: RobotState, kinds: tuple[str, ...], groups: list[str]
+    snapshot: FleetSnapshot,
+    robot: RobotState,
+    kinds: tuple[str, ...],
+    groups: list[str],
+    maintenance: Maintenance | None = None,
 ) -> list[CheckResult]:
     """The host result and every service result of `robot` now; `kinds` holds robot and/or groups.
 
     `groups` are the group services to judge: the robot's groups now and any it had before, which the
     check then judges as it would (UNKNOWN, no component matches) instead of leaving them frozen.
+    `maintenance` is the window the robot is in, which every result names.
     """
-    judged = judged_robot(snapshot, robot)
+    judged = judged_robot(snapshot, robot, maintenance)
     host = host_name(robot.name)
     up = judged.up
-    results = [
-        CheckResult(
-            host,
-            "",
-            HOST_UP if up else HOST_DOWN,
-            f"UP - {judged.name}: diagnostics arriving"
-            if up
-            else f"DOWN - {judged.name} is down: {down_text(judged)}",
-            (),
-        )
-    ]
+    host_text = f"UP - {judged.name}: diagnostics arriving"
+    if not up:
+        host_text = f"DOWN - {judged.name} is down: {down_text(judged)}"
+    if maintenance is not None:
+        host_text += maintenance_text(maintenance)
+    results = [CheckResult(host, "", HOST_UP if up else HOST_DOWN, host_text, ())]
     if "robot" in kinds:
         results.append(service_result(host, ROBOT_SERVICE, judge(judged, Settings())))
     if "groups" in kinds:
@@ -81,7 +90,7 @@ def robot_results(
     return results
 
 
-def judged_robot(snapshot: FleetSnapshot, robot: RobotState) -> Robot:
+def judged_robot(snapshot: FleetSnapshot, robot: RobotState, maintenance: Maintenance | None = None) -> Robot:
     """The robot as the verdict reads it: what `GET /api/v1/robots/<robot>` shows of it, now."""
     up = snapshot.robot_up(robot)
     components = [
@@ -94,7 +103,9 @@ def judged_robot(snapshot: FleetSnapshot, robot: RobotState) -> Robot:
         )
         for key, component in sorted(robot.components.items())
     ]
-    return Robot(robot.name, up, robot.last_message, snapshot.taken_at, components, robot.publisher_alive)
+    return Robot(
+        robot.name, up, robot.last_message, snapshot.taken_at, components, robot.publisher_alive, maintenance
+    )
 
 
 def service_result(host: str, service: str, verdict: Verdict) -> CheckResult:
