@@ -4,6 +4,9 @@
 import {agoText, badge, element, getJson, timeText} from "./dom.js";
 import {renderMatches, renderRobots, renderSummary} from "./fleet.js";
 import {fleetQuery, pageHref, readQuery, robotQuery} from "./location.js";
+import {
+  MAINTENANCE, loadMaintenance, renderMaintenancePanel, renderRobotMaintenance, setUpMaintenanceForms,
+} from "./maintenance.js";
 import {Timeline} from "./timeline.js";
 import {buildTree, renderTree} from "./tree.js";
 
@@ -47,11 +50,13 @@ async function renderFleet(current) {
   const matchQuery = new URLSearchParams({limit: String(MATCH_LIMIT)});
   if (current.levels.size) matchQuery.set("level", [...current.levels].join(","));
   if (current.q) matchQuery.set("q", current.q);
-  const [robots, matches] = await Promise.all([
+  const [robots, matches, maintenance] = await Promise.all([
     getJson("api/v1/robots"),
     filtered ? getJson(`api/v1/components?${matchQuery}`) : Promise.resolve(null),
+    loadMaintenance(),
   ]);
   if (current !== view) return false;
+  renderMaintenancePanel(maintenance, refresh);
   const matched = new Set(current.q && matches ? matches.robots.map((r) => r.robot) : []);
   renderSummary(robots, current, toggleLevel);
   renderRobots(robots, current, matched, openGroups, openRobot);
@@ -74,8 +79,9 @@ async function renderRobot(current) {
   getJson("api/v1/robots").then((robots) => {
     if (current === view) renderSummary(robots, {...current, levels: new Set()}, toggleLevel);
   }, () => {});
-  const [robot] = await Promise.all([
+  const [robot, maintenance] = await Promise.all([
     getJson(path).catch((error) => (error.status === 404 ? null : Promise.reject(error))),
+    loadMaintenance(),
     timeline.refresh().catch((error) => timeline.fail(error)),
   ]);
   if (current !== view) return false;
@@ -87,7 +93,7 @@ async function renderRobot(current) {
     document.getElementById("robot-facts").textContent = "The exporter does not know this robot (yet).";
     tree.replaceChildren();
   } else {
-    title.replaceChildren(badge(robot.up ? robot.state : "STALE"), " ",
+    title.replaceChildren(badge(robot.maintenance ? MAINTENANCE : (robot.up ? robot.state : "STALE")), " ",
       element("span", {class: "node-name"}, robot.robot), `: ${robot.up ? robot.state : "DOWN"}`);
     const c = robot.counts;
     document.getElementById("robot-facts").textContent =
@@ -96,6 +102,7 @@ async function renderRobot(current) {
     const folders = folderMemory(current.robot);
     renderTree(tree, buildTree(robot.components), robot.generated_at, folders, showHistoryOf);
   }
+  renderRobotMaintenance(robot, maintenance, refresh);
   const narrowed = document.getElementById("timeline-component");
   narrowed.hidden = current.component === null;
   narrowed.replaceChildren(`only ${current.component ?? ""} · `, allHistoryLink(current.robot));
@@ -184,4 +191,5 @@ if (location.hash.length > 1 && view.robot === null) {
   history.replaceState(null, "", pageHref(robotQuery(view.robot)));
 }
 setUpControls();
+setUpMaintenanceForms(() => view.robot, refresh);
 refresh();

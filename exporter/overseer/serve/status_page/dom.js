@@ -57,3 +57,20 @@ export async function getJson(path) {
   }
   return response.json();
 }
+
+/** Send a JSON `body` (or none) with `method`; the answer's JSON, or an Error with the exporter's reason. */
+export async function sendJson(method, path, body) {
+  const init = {method, cache: "no-store", headers: {}};
+  if (body !== undefined) {
+    init.headers["Content-Type"] = "application/json";
+    init.body = JSON.stringify(body);
+  }
+  const response = await fetch(path, init);
+  const answer = await response.json().catch(() => ({}));
+  if (!response.ok) {
+    const error = new Error(answer.error || `${path}: HTTP ${response.status}`);
+    error.status = response.status;
+    throw error;
+  }
+  return answer;
+}

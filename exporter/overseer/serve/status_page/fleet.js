@@ -1,8 +1,9 @@
 // The fleet view: counts per level, robots grouped by namespace prefix, filtered, searched and sorted,
 // and the components across the fleet that match the filter (found by the exporter, bounded).
 
-import {STATES, agoText, badge, element, rank, worstState} from "./dom.js";
+import {STATES, agoText, badge, element, rank, timeText, worstState} from "./dom.js";
 import {pageHref, robotQuery} from "./location.js";
+import {MAINTENANCE, shownState} from "./maintenance.js";
 
 const collator = new Intl.Collator(undefined, {numeric: true});
 const NO_NAMESPACE = "";
@@ -15,18 +16,19 @@ export function namespaceOf(name) {
 
 const COMPARE = {
   name: (a, b) => collator.compare(a.robot, b.robot),
-  level: (a, b) => rank(b.state) - rank(a.state) || collator.compare(a.robot, b.robot),
+  level: (a, b) => rank(shownState(b)) - rank(shownState(a)) || collator.compare(a.robot, b.robot),
   errors: (a, b) => b.counts.error - a.counts.error || b.counts.warn - a.counts.warn
     || collator.compare(a.robot, b.robot),
   last_message: (a, b) => (a.last_message ?? -Infinity) - (b.last_message ?? -Infinity)
     || collator.compare(a.robot, b.robot),
 };
 
-/** The robots `view` shows, sorted: level filter on the robot's level, text on its name or components. */
+/** The robots `view` shows, sorted: level filter on the robot's level, text on its name or components.
+ * A robot in maintenance has no level here: the level filters leave it out. */
 export function visibleRobots(robots, view, matchedRobots) {
   const needle = view.q.toLowerCase();
   const shown = robots.filter((robot) =>
-    (!view.levels.size || view.levels.has(robot.state))
+    (!view.levels.size || view.levels.has(shownState(robot)))
     && (!needle || robot.robot.toLowerCase().includes(needle) || matchedRobots.has(robot.robot)));
   return shown.sort(COMPARE[view.sort] || COMPARE.name);
 }
@@ -42,15 +44,18 @@ export function groupRobots(robots) {
   return groups;
 }
 
-/** The counts per level at the top; each level is a toggle of the level filter. */
+/** The counts per level at the top; each level is a toggle of the level filter. Robots in maintenance
+ * are counted apart, not by level, and not as down. */
 export function renderSummary(robotsDocument, view, onToggleLevel) {
   const robots = robotsDocument.robots;
   const totals = Object.fromEntries(STATES.map((s) => [s, 0]));
   const components = Object.fromEntries(STATES.map((s) => [s, 0]));
   let down = 0;
+  let inMaintenance = 0;
   for (const robot of robots) {
-    totals[robot.state] += 1;
-    if (!robot.up) down += 1;
+    if (robot.maintenance) inMaintenance += 1;
+    else totals[robot.state] += 1;
+    if (!robot.up && !robot.maintenance) down += 1;
     for (const state of STATES) components[state] += robot.counts[state.toLowerCase()];
   }
   const chips = STATES.map((state) => {
@@ -65,6 +70,7 @@ export function renderSummary(robotsDocument, view, onToggleLevel) {
   document.getElementById("summary").replaceChildren(...chips,
     element("span", {class: "fact", "data-total": "robots"}, `${robots.length} robots`),
     element("span", {class: "fact", "data-total": "down"}, `down ${down}`),
+    element("span", {class: "fact", "data-total": "maintenance"}, `in maintenance ${inMaintenance}`),
     element("span", {class: "fact", "data-total": "components"},
       `${componentTotal} components: ${STATES.map((s) => `${components[s]} ${s}`).join(", ")}`));
 }
@@ -77,8 +83,10 @@ export function renderRobots(robotsDocument, view, matchedRobots, openGroups, on
     `Showing ${shown.length} of ${robotsDocument.robots.length} robots`;
   const sections = [];
   for (const [name, robots] of groupRobots(shown)) {
-    const worst = worstState(robots.map((r) => r.state));
-    const perState = STATES.map((s) => [s, robots.filter((r) => r.state === s).length]).filter(([, n]) => n);
+    const judged = robots.filter((r) => !r.maintenance);
+    const worst = judged.length ? worstState(judged.map((r) => r.state)) : MAINTENANCE;
+    const perState = [...STATES, MAINTENANCE].map((s) => [s, robots.filter((r) => shownState(r) === s).length])
+      .filter(([, n]) => n);
     const details = element("details", {class: "group", "data-group": name, open: openGroups.get(name) ?? true},
       element("summary", {},
         badge(worst), " ",
@@ -96,11 +104,16 @@ export function renderRobots(robotsDocument, view, matchedRobots, openGroups, on
 
 function robotRow(robot, now, onOpenRobot) {
   const c = robot.counts;
-  return element("tr", {"data-robot": robot.robot, "data-state": robot.state, class: robot.up ? null : "down"},
-    element("td", {}, badge(robot.state)),
+  const m = robot.maintenance;
+  const seen = robot.up ? agoText(robot.last_message, now) : `down, last ${agoText(robot.last_message, now)}`;
+  return element("tr", {"data-robot": robot.robot, "data-state": shownState(robot),
+                        class: m ? "maintenance" : (robot.up ? null : "down")},
+    element("td", {}, badge(shownState(robot))),
     element("td", {class: "robot-name"}, robotLink(robot.robot, onOpenRobot)),
-    element("td", {}, `${c.error} error · ${c.warn} warn · ${c.stale} stale · ${c.ok} ok`),
-    element("td", {}, robot.up ? agoText(robot.last_message, now) : `down, last ${agoText(robot.last_message, now)}`));
+    element("td", {}, `${c.error} error · ${c.warn} warn · ${c.stale} stale · ${c.ok} ok`
+      + (m ? ` (${robot.up ? robot.state : "DOWN"})` : "")),
+    element("td", {}, m ? element("span", {class: "maintenance-note", title: m.comment},
+      `until ${timeText(m.until)} · ${m.author}: ${m.comment} · ${seen}`) : seen));
 }
 
 /** A link to a robot's view that navigates in place (a new tab still works: it is a real link). */

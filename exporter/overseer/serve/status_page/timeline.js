@@ -83,7 +83,8 @@ export class Timeline {
 }
 
 function eventItem(event) {
-  const state = event.new_state || (event.kind === "robot_up" ? "OK" : "STALE");
+  const state = event.kind.startsWith("maintenance_") ? "MAINTENANCE"
+    : event.new_state || (event.kind === "robot_up" ? "OK" : "STALE");
   return element("li", {class: "event", "data-event-id": String(event.id), "data-kind": event.kind,
                         "data-component": event.component ?? "", "data-state": state},
     element("time", {datetime: new Date(event.time * 1000).toISOString()}, timeText(event.time)),
@@ -91,6 +92,11 @@ function eventItem(event) {
     element("span", {class: "node-name"}, event.component ?? "robot"),
     element("span", {class: "change"}, describe(event)),
     event.message ? element("span", {class: "message"}, event.message) : null);
+}
+
+function valueOf(event, key) {
+  const pair = (event.values || []).find((item) => item.key === key);
+  return pair ? pair.value : "?";
 }
 
 function describe(event) {
@@ -101,6 +107,8 @@ function describe(event) {
     case "appeared": return `appeared${event.new_state ? ` as ${event.new_state}` : ""}`;
     case "missing": return "missing";
     case "expired": return "expired";
+    case "maintenance_start": return `maintenance starts (${valueOf(event, "author")}, until ${valueOf(event, "until")})`;
+    case "maintenance_end": return "maintenance ends";
     default: return String(event.kind);
   }
 }

@@ -1,0 +1,189 @@
+"""Maintenance windows become downtimes in a real Icinga 2 (Debian's), for each robot's host and services.
+
+Icinga 2 runs with the shipped push ApiUser example (deploy/icinga2/push), whose permissions must cover
+scheduling and removing downtimes of the exporter's own hosts only, and with a host an operator made and
+put in a downtime by hand. Each test runs an exporter in the test process, its model fed by the test,
+pushing to that Icinga 2 with a window API that alice may write.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from base64 import b64encode
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import bcrypt
+import pytest
+
+from overseer.app import Exporter
+from testbed.icinga2 import Icinga2, push_api_user, push_config, running_icinga2
+from testbed.in_process import call, in_process_exporter, publish
+from testbed.nagios import run_check
+from testbed.processes import wait_for
+
+pytestmark = pytest.mark.servers
+
+HASH = bcrypt.hashpw(b"secret", bcrypt.gensalt(rounds=4)).decode()
+WRITER = {"Authorization": "Basic " + b64encode(b"alice:secret").decode()}
+HANDMADE = """object Host "operators-box" {
+	check_command = "dummy"
+}
+"""
+COMPONENTS = ((2, "/Power/Battery", "cell failure"), (0, "/Motor/Left", "ok"))
+
+
+@pytest.fixture(scope="module")
+def icinga(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Icinga2]:
+    """Icinga 2 with the push ApiUser example and an operator's host in a downtime of the operator's."""
+    with running_icinga2(tmp_path_factory.mktemp("icinga2"), push_api_user() + HANDMADE) as daemon:
+        now = time.time()
+        daemon.api(
+            "POST",
+            "/v1/actions/schedule-downtime",
+            {
+                "type": "Host",
+                "host": "operators-box",
+                "start_time": now,
+                "end_time": now + 86400,
+                "fixed": True,
+                "author": "operator",
+                "comment": "the operator's own",
+            },
+        )
+        yield daemon
+
+
+@contextmanager
+def exporter(tmp_path: Path, daemon: Icinga2, exporter_id: str) -> Iterator[Exporter]:
+    """An exporter pushing to `daemon` every second, as the example ApiUser; alice may write windows."""
+    section = json.loads(push_config(tmp_path, daemon, exporter_id, "1s", timeout="3s").read_text())[
+        "icinga2"
+    ]
+    web_config = tmp_path / "web.yml"
+    web_config.write_text(f"basic_auth_users:\n  alice: '{HASH}'\n", encoding="utf-8")
+    with in_process_exporter(
+        tmp_path,
+        web={"config_file": str(web_config), "enable_maintenance_api": True},
+        maintenance={"writers": ["alice"]},
+        icinga2=section,
+    ) as running:
+        yield running
+
+
+def open_window(running: Exporter, robots: str, comment: str) -> dict[str, Any]:
+    body = json.dumps({"robots": robots, "duration": "3h", "comment": comment}).encode()
+    status, answer = call(
+        running, "/api/v1/maintenance", "POST", body, {**WRITER, "Content-Type": "application/json"}
+    )
+    assert status == 201, answer
+    window: dict[str, Any] = answer["window"]
+    return window
+
+
+def downtimes(daemon: Icinga2) -> dict[str, dict[str, Any]]:
+    """Every downtime Icinga holds, by `host!service` (or host), with its author, comment and end."""
+    answer = daemon.api(
+        "GET",
+        "/v1/objects/downtimes",
+        {"attrs": ["host_name", "service_name", "author", "comment", "end_time"]},
+    )
+    return {
+        "!".join(filter(None, (item["attrs"]["host_name"], item["attrs"]["service_name"]))): item["attrs"]
+        for item in answer["results"]
+    }
+
+
+def objects_of(daemon: Icinga2, host: str) -> set[str]:
+    """The host and its services, as `downtimes` names them."""
+    names = {name for name in daemon.objects("services") if name.split("!", 1)[0] == host}
+    return {host} | names if host in daemon.objects("hosts") else set()
+
+
+def effects(running: Exporter, name: str) -> dict[str, float]:
+    _, body = call(running, "/metrics", headers=WRITER)
+    return {
+        line.rpartition(" ")[0].removeprefix(name): float(line.rpartition(" ")[2])
+        for line in body.decode().splitlines()
+        if line.startswith(name + "{") and 'target="icinga2"' in line
+    }
+
+
+def test_a_window_puts_each_robots_host_and_services_in_downtime_until_ended(
+    tmp_path: Path, icinga: Icinga2
+) -> None:
+    with exporter(tmp_path, icinga, "dt1") as running:
+        for robot in ("dt1_a/r1", "dt1_a/r2", "dt1_b/r1"):
+            publish(running, robot, *COMPONENTS)
+        hosts = ("dt1_a.r1", "dt1_a.r2", "dt1_b.r1")
+        wait_for(lambda: all(len(objects_of(icinga, h)) == 4 for h in hosts), 30, message="hosts, services")
+        window = open_window(running, "dt1_a/", 'swap <batteries> & "wheels"')
+        expected = objects_of(icinga, "dt1_a.r1") | objects_of(icinga, "dt1_a.r2")
+        wait_for(lambda: expected <= set(downtimes(icinga)), 15, message="the downtimes")
+        held = downtimes(icinga)
+        assert {name for name in held if name.startswith("dt1_")} == expected, "dt1_b.r1 is in no window"
+        for name in expected:
+            assert held[name]["author"] == "alice"
+            assert (
+                held[name]["comment"]
+                == f'swap <batteries> & "wheels" [Overseer maintenance window {window["id"]}]'
+            )
+            assert abs(held[name]["end_time"] - window["end"]) < 1
+
+        publish(running, "dt1_a/r1", *COMPONENTS, (1, "/Camera/Front", "dirty lens"))  # a new group service
+        wait_for(
+            lambda: "dt1_a.r1!ros-diagnostics-Camera" in downtimes(icinga),
+            15,
+            message="the new service's downtime",
+        )
+        output = wait_for(
+            lambda: (r := icinga.host_result("dt1_a.r1")) and "maintenance" in r.output and r,
+            15,
+            message="output",
+        ).output
+        assert (
+            f"[in maintenance until {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(window['end']))}"
+            in output
+        )
+        checked = run_check("--url", running.server.url, "-r", "dt1_a/r2", "-a", "alice:secret")
+        assert checked.state == 2, "a window leaves the check's state as it is"
+        assert "[in maintenance until" in checked.output and 'swap <batteries> & "wheels"]' in checked.output
+
+        status, _ = call(running, f"/api/v1/maintenance/{window['id']}", "DELETE", None, WRITER)
+        assert status == 200
+        wait_for(
+            lambda: not any(name.startswith("dt1_") for name in downtimes(icinga)),
+            15,
+            message="downtimes removed",
+        )
+        assert "operators-box" in downtimes(icinga), "the operator's own downtime was touched"
+        counts = effects(running, "overseer_maintenance_effects_total")
+    assert counts['{action="created",target="icinga2"}'] == 3  # two hosts, then the new service
+    assert counts['{action="removed",target="icinga2"}'] == 2
+
+
+def test_an_icinga_that_was_down_gets_the_downtime_once_back(tmp_path: Path) -> None:
+    with (
+        running_icinga2(tmp_path / "icinga2", push_api_user()) as daemon,
+        exporter(tmp_path, daemon, "dt2") as running,
+    ):
+        publish(running, "dt2/r1", *COMPONENTS)
+        wait_for(lambda: len(objects_of(daemon, "dt2.r1")) == 4, 30, message="host and services")
+        daemon.stop()
+        window = open_window(running, "dt2/r1", "motor swap")
+        wait_for(
+            lambda: effects(running, "overseer_maintenance_effects_pending") == {'{target="icinga2"}': 1.0},
+            15,
+            message="the downtime pending",
+        )
+        daemon.start()
+        wait_for(lambda: len(downtimes(daemon)) == 4, 60, message="the downtime once Icinga is back")
+        assert all(window["id"] in item["comment"] for item in downtimes(daemon).values())
+        wait_for(
+            lambda: effects(running, "overseer_maintenance_effects_pending") == {'{target="icinga2"}': 0.0},
+            15,
+            message="nothing pending",
+        )
