@@ -104,7 +104,7 @@ def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alo
         assert queries, name
         for query in queries:
             for selector in selectors(query):
-                assert 'instance=%q,robot=%q' in selector.matchers, f"{name}: {selector}"
+                assert "instance=%q,robot=%q" in selector.matchers, f"{name}: {selector}"
 
 
 def test_only_the_message_annotation_queries_and_the_robot_down_alert_not_at_all() -> None:
@@ -277,7 +277,7 @@ MANY_ERRORS = {
     "labels": {"alertname": "RosRobotError", "robot": "alpha"},
     "annotations": {
         **BATTERY_ERROR["annotations"],
-        "message": "/Laser/Laser1: No scans received; /Motor/Motor2: Motor fault; /Power/Battery: battery low",
+        "message": "/Laser/Laser1: No scans; /Motor/Motor2: Motor fault; /Power/Battery: battery low",
     },
 }
 ROBOT_DOWN = {
@@ -315,7 +315,7 @@ def test_template_titles_a_battery_error_with_its_message(tmp_path: Any) -> None
 
 def test_template_titles_a_robot_with_many_failing_components_on_one_line(tmp_path: Any) -> None:
     assert render(tmp_path, "overseer.title", notification(MANY_ERRORS)) == (
-        "alpha ERROR — /Laser/Laser1: No scans received; /Motor/Motor2: Motor fault; /Power/Battery: battery low"
+        "alpha ERROR — /Laser/Laser1: No scans; /Motor/Motor2: Motor fault; /Power/Battery: battery low"
     )
 
 
@@ -332,7 +332,9 @@ def test_template_text_lists_every_alert_with_its_links(tmp_path: Any) -> None:
     )
 
 
-def test_template_marks_resolved_alerts_and_falls_back_to_the_summary_without_a_message(tmp_path: Any) -> None:
+def test_template_marks_resolved_alerts_and_falls_back_to_the_summary_without_a_message(
+    tmp_path: Any,
+) -> None:
     assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR, status="resolved")) == (
         "alpha ERROR — /Power/Battery: battery critically low (4 %) (resolved)"
     )
