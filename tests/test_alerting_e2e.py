@@ -134,7 +134,7 @@ def notification(webhook: WebhookReceiver, status: str, timeout: float, **labels
     return alert
 
 
-def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_component_alerts(
+def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_other_alerts(
     tmp_path: Path, dds_domain: int, capsys: pytest.CaptureFixture[str]
 ) -> None:
     profile = PROFILES[PROFILE_NAME]
