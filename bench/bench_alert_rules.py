@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from support.alertmanager import Alertmanager, example_config, running_alertmanager
 from support.ports import fresh_domain_id
 from support.processes import Exporter, running_exporter, running_simulator, wait_for
-from support.prometheus import Prometheus, running_prometheus, shipped_config
+from support.prometheus import Prometheus, parse_duration, running_prometheus, shipped_config
 from support.webhook import WebhookReceiver, running_webhook
 
 COMPONENTS, WARN, ERROR = 50, 3, 2
@@ -154,6 +154,16 @@ def notifications_sent(alertmanager: Alertmanager) -> float:
     )
 
 
+def scrape_health(prometheus: Prometheus, seconds: float) -> tuple[float, float]:
+    """The slowest scrape of the exporter over the last `seconds`, and how many scrapes failed."""
+    window = f"{seconds:.0f}s"
+    slowest = prometheus.query(f'max_over_time(scrape_duration_seconds{{job="overseer"}}[{window}])')
+    failed = prometheus.query(
+        f'count_over_time(up{{job="overseer"}}[{window}]) - sum_over_time(up{{job="overseer"}}[{window}])'
+    )
+    return float(slowest[0]["value"][1]), float(failed[0]["value"][1])
+
+
 def alert_counts(prometheus: Prometheus) -> dict[str, int]:
     """Prometheus' alerts now by state, the floor's left out."""
     counts: dict[str, int] = {}
@@ -223,6 +233,7 @@ def measure_profile(
     received_before = len(webhook.alerts())
     with running_alertmanager(directory, example_config(webhook.url)) as alertmanager:
         config = shipped_config(PROFILES[profile], exporter.url, alertmanager.url)
+        timeout = parse_duration(config["global"]["scrape_timeout"])
         # The floor's alerts stay in Prometheus: only the shipped alerts reach Alertmanager.
         config["alerting"]["alert_relabel_configs"] = [
             {"source_labels": ["alertname"], "regex": "Floor.*", "action": "drop"}
@@ -230,6 +241,7 @@ def measure_profile(
         with running_prometheus(directory, config) as prometheus:
             time.sleep(90.0 if profile == "default" else 45.0)  # alerts past `for:`, first notifications out
             alone = observe(prometheus, seconds)
+            scrapes = scrape_health(prometheus, seconds)
             counts = alert_counts(prometheus)
             sent = notifications_sent(alertmanager)
             received = webhook.alerts()[received_before:]
@@ -243,6 +255,15 @@ def measure_profile(
     robots_notified = len({alert.labels.get("robot") for alert in received if alert.status == "firing"})
     return [
         *target_rows(label, alone),
+        Row(
+            "alert rules",
+            f"{label}: slowest scrape of the exporter",
+            scrapes[0],
+            "s",
+            f"< {timeout:.0f}",
+            scrapes[0] < timeout,
+        ),
+        Row("alert rules", f"{label}: failed scrapes of the exporter", scrapes[1], "", "0", scrapes[1] == 0),
         Row("alert rules", f"{label}: alerts firing", counts.get("firing", 0), "alerts"),
         Row("alert rules", f"{label}: alerts pending", counts.get("pending", 0), "alerts"),
         Row("alert rules", f"{label}: Alertmanager notifications sent", sent, "notifications"),
