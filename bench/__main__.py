@@ -25,6 +25,7 @@ BENCHMARKS = (
     "bench.bench_status_page",
     "bench.bench_events",
     "bench.bench_icinga2",
+    "bench.bench_alert_rules",
 )
 
 

@@ -82,14 +82,58 @@ def test_every_alert_has_for_severity_summary_description_and_a_runbook_section(
         assert name.lower() in runbook_anchors, f"docs/runbook.md has no section for {name}"
 
 
-def test_component_alerts_name_robot_and_component_and_say_where_the_status_message_is() -> None:
-    for name, rule in alerts().items():
-        if not name.startswith("RosComponent"):
-            continue
+def robot_alerts(path: Any = DEFAULT_RULES) -> dict[str, dict[str, Any]]:
+    """The alerts about one robot: those that link to its page on the status page."""
+    return {name: rule for name, rule in alerts(path).items() if "status_page_url" in rule["annotations"]}
+
+
+def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alone() -> None:
+    assert set(robot_alerts()) == {
+        "RosRobotError",
+        "RosRobotWarning",
+        "RosRobotStale",
+        "RosRobotDown",
+        "RosRobotFlapping",
+    }
+    for name, rule in robot_alerts().items():
         annotations = rule["annotations"]
         assert "{{ $labels.robot }}" in annotations["summary"], name
-        assert "{{ $labels.component }}" in annotations["summary"], name
+        if name == "RosRobotDown":
+            continue
         assert "/api/v1/robots/{{ $labels.robot }}" in annotations["description"], name
+        queries = re.findall(r"printf `([^`]*)`", annotations["message"])
+        assert queries, name
+        for query in queries:
+            for selector in selectors(query):
+                assert "instance=%q,robot=%q" in selector.matchers, f"{name}: {selector}"
+
+
+def test_only_the_message_annotation_queries_and_the_robot_down_alert_not_at_all() -> None:
+    # Prometheus expands every annotation of every pending or firing alert at every evaluation: at fleet scale
+    # each query there costs once per robot in trouble.
+    for name, rule in alerts().items():
+        for annotation, text in rule["annotations"].items():
+            if annotation != "message":
+                assert "| query" not in text, f"{name} {annotation}"
+    assert "message" not in alerts()["RosRobotDown"]["annotations"]
+
+
+def test_every_robot_alert_joins_the_one_per_robot_recording_rule() -> None:
+    # robot:overseer_web_info:external_url carries the link label; a robot it leaves out raises no alert.
+    for name, rule in robot_alerts().items():
+        assert "group_left (external_url) robot:overseer_web_info:external_url{" in rule["expr"], name
+
+
+COMPONENT_SERIES = {"ros_diagnostics_level", "ros_diagnostics_level_changes_total", "ros_diagnostics_value"}
+
+
+@pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
+def test_only_the_once_a_minute_group_reads_every_component(rules: Any) -> None:
+    document = yaml.safe_load(rules.read_text(encoding="utf-8"))
+    for group in document["groups"]:
+        read = {selector.metric for rule in group["rules"] for selector in selectors(rule["expr"])}
+        if read & COMPONENT_SERIES:
+            assert parse_duration(group["interval"]) == 60, group["name"]
 
 
 def test_every_selector_selects_the_overseer_job() -> None:
@@ -104,7 +148,12 @@ def test_recording_rules_are_named_level_metric_operations_after_the_metric_they
     for rule in recording:
         assert RECORDING_RULE_NAME.fullmatch(rule["record"]), rule["record"]
         metric = rule["record"].split(":")[1]
-        assert metric in {selector.metric for selector in selectors(rule["expr"])}, rule["record"]
+        # Read directly, or through another recording rule of the same metric.
+        read = {
+            selector.metric.split(":")[1] if ":" in selector.metric else selector.metric
+            for selector in selectors(rule["expr"])
+        }
+        assert metric in read, rule["record"]
 
 
 def test_fast_profile_is_the_default_profile_with_shorter_for() -> None:
@@ -115,15 +164,15 @@ def test_fast_profile_is_the_default_profile_with_shorter_for() -> None:
 
 
 @pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
-def test_robot_down_fires_before_its_components_stale_alerts(config: str) -> None:
+def test_robot_down_fires_before_its_stale_alert(config: str) -> None:
     # A stopped robot's components turn STALE (stale_after 5s) before it counts as down (robot_timeout 10s).
     # RosRobotDown must still fire first, by more than that gap plus one scrape and one evaluation, so that
-    # Alertmanager inhibits the STALE alerts before it sends them.
+    # Alertmanager inhibits RosRobotStale before it sends it.
     path = DEPLOY_PROMETHEUS / config
     settings = yaml.safe_load(path.read_text(encoding="utf-8"))
     (rule_file,) = settings["rule_files"]
     rule = alerts(path.parent / rule_file)
-    margin = parse_duration(rule["RosComponentStale"]["for"]) - parse_duration(rule["RosRobotDown"]["for"])
+    margin = parse_duration(rule["RosRobotStale"]["for"]) - parse_duration(rule["RosRobotDown"]["for"])
     intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
         settings["global"]["evaluation_interval"]
     )
@@ -160,7 +209,7 @@ def test_alertmanager_groups_by_robot() -> None:
     assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes)
 
 
-def test_a_down_robot_inhibits_exactly_the_component_alerts_of_the_same_robot() -> None:
+def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot() -> None:
     config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
     robot_down = {"alertname": "RosRobotDown", **alerts()["RosRobotDown"]["labels"]}
     inhibited = set()
@@ -175,23 +224,21 @@ def test_a_down_robot_inhibits_exactly_the_component_alerts_of_the_same_robot() 
                     for matcher in rule["target_matchers"]
                 )
             }
-    assert inhibited == {
-        name for name in alerts() if "{{ $labels.component }}" in alerts()[name]["annotations"]["summary"]
-    }
+    assert inhibited == set(robot_alerts()) - {"RosRobotDown"}
 
 
 @pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
-def test_component_alerts_carry_message_and_robot_link_in_annotations_never_in_labels(rules: Any) -> None:
+def test_robot_alerts_carry_message_and_robot_link_in_annotations_never_in_labels(rules: Any) -> None:
     for name, rule in alerts(rules).items():
         assert "message" not in rule.get("labels", {}), name
+    for name, rule in robot_alerts(rules).items():
         annotations = rule["annotations"]
-        if name.startswith("RosComponent"):
+        if name in {"RosRobotError", "RosRobotWarning"}:
             assert "ros_diagnostics_status_message{" in annotations["message"], name
-            assert '| label "message"' in annotations["message"], name
-        if name.startswith("Ros"):
-            assert "overseer_web_info{" in annotations["status_page_url"], name
-            link = '/?robot={{ reReplaceAll `\\+` "%20" ($labels.robot | urlquery) }}'
-            assert link in annotations["status_page_url"], name
+            assert "$c.Labels.message" in annotations["message"], name
+        assert "$labels.external_url" in annotations["status_page_url"], name
+        link = '/?robot={{ reReplaceAll `\\+` "%20" ($labels.robot | urlquery) }}'
+        assert link in annotations["status_page_url"], name
 
 
 @pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
@@ -219,12 +266,19 @@ def notification(*alerts: dict[str, Any], status: str = "firing") -> dict[str, A
 
 
 BATTERY_ERROR = {
-    "labels": {"alertname": "RosComponentError", "robot": "alpha", "component": "/Power/Battery"},
+    "labels": {"alertname": "RosRobotError", "robot": "alpha"},
     "annotations": {
-        "summary": "alpha: /Power/Battery is in ERROR",
-        "message": "battery critically low (4 %)",
+        "summary": "alpha is in ERROR",
+        "message": "/Power/Battery: battery critically low (4 %)",
         "status_page_url": "https://ops.example/?robot=alpha",
-        "runbook_url": "docs/runbook.md#roscomponenterror",
+        "runbook_url": "docs/runbook.md#rosroboterror",
+    },
+}
+MANY_ERRORS = {
+    "labels": {"alertname": "RosRobotError", "robot": "alpha"},
+    "annotations": {
+        **BATTERY_ERROR["annotations"],
+        "message": "/Laser/Laser1: No scans; /Motor/Motor2: Motor fault; /Power/Battery: battery low",
     },
 }
 ROBOT_DOWN = {
@@ -256,15 +310,21 @@ def test_alertmanager_example_loads_the_shipped_templates() -> None:
 
 def test_template_titles_a_battery_error_with_its_message(tmp_path: Any) -> None:
     assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR)) == (
-        "alpha: Power/Battery ERROR — battery critically low (4 %)"
+        "alpha ERROR — /Power/Battery: battery critically low (4 %)"
+    )
+
+
+def test_template_titles_a_robot_with_many_failing_components_on_one_line(tmp_path: Any) -> None:
+    assert render(tmp_path, "overseer.title", notification(MANY_ERRORS)) == (
+        "alpha ERROR — /Laser/Laser1: No scans; /Motor/Motor2: Motor fault; /Power/Battery: battery low"
     )
 
 
 def test_template_text_lists_every_alert_with_its_links(tmp_path: Any) -> None:
     assert render(tmp_path, "overseer.text", notification(BATTERY_ERROR, ROBOT_DOWN)) == (
-        "alpha: Power/Battery ERROR — battery critically low (4 %)\n"
+        "alpha ERROR — /Power/Battery: battery critically low (4 %)\n"
         "  status page: https://ops.example/?robot=alpha\n"
-        "  runbook: docs/runbook.md#roscomponenterror\n"
+        "  runbook: docs/runbook.md#rosroboterror\n"
         "alpha is down\n"
         "  status page: https://ops.example/?robot=alpha\n"
     )
@@ -273,8 +333,11 @@ def test_template_text_lists_every_alert_with_its_links(tmp_path: Any) -> None:
     )
 
 
-def test_template_marks_resolved_alerts_and_leaves_out_an_empty_message(tmp_path: Any) -> None:
-    quiet = {**BATTERY_ERROR, "annotations": {**BATTERY_ERROR["annotations"], "message": ""}}
-    assert render(tmp_path, "overseer.title", notification(quiet, status="resolved")) == (
-        "alpha: Power/Battery ERROR (resolved)"
+def test_template_marks_resolved_alerts_and_falls_back_to_the_summary_without_a_message(
+    tmp_path: Any,
+) -> None:
+    assert render(tmp_path, "overseer.title", notification(BATTERY_ERROR, status="resolved")) == (
+        "alpha ERROR — /Power/Battery: battery critically low (4 %) (resolved)"
     )
+    quiet = {**BATTERY_ERROR, "annotations": {**BATTERY_ERROR["annotations"], "message": ""}}
+    assert render(tmp_path, "overseer.title", notification(quiet)) == "alpha is in ERROR"

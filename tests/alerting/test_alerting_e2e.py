@@ -4,7 +4,7 @@ Debian's Prometheus runs the shipped rules, Debian's Alertmanager the shipped ex
 receiver, the exporter and the simulator, all on loopback.
 
 robot1's /Laser/Laser1 turns ERROR and back to OK while robot2 stops. The webhook must get the firing and the
-resolved RosComponentError and RosRobotDown; robot2's STALE component alerts must be inhibited. The test times
+resolved RosRobotError and RosRobotDown; robot2's RosRobotStale must be inhibited. The test times
 each notification from the exporter receiving its cause, and prints the times.
 
 By default it runs the fast profile's rules with 1s intervals and 1s Alertmanager batching, to keep the suite
@@ -27,6 +27,7 @@ from typing import Any
 
 import pytest
 
+from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
 from testbed.alertmanager import example_config, running_alertmanager
 from testbed.paths import REPO
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
@@ -106,12 +107,12 @@ def budget(prometheus: dict[str, Any], alertmanager: dict[str, Any], profile: Pr
         return parse_duration(rules[alert]["for"])
 
     return Budget(
-        error=for_("RosComponentError") + pipeline + critical_wait,
+        error=for_("RosRobotError") + pipeline + critical_wait,
         resolved=pipeline + route_setting(alertmanager, "critical", "group_interval"),
         down=profile.robot_timeout + for_("RosRobotDown") + pipeline + critical_wait,
-        stale=profile.robot_timeout + for_("RosComponentStale") + pipeline,
+        stale=profile.robot_timeout + for_("RosRobotStale") + pipeline,
         warning_group_wait=route_setting(alertmanager, "warning", "group_wait"),
-        error_for=for_("RosComponentError"),
+        error_for=for_("RosRobotError"),
         down_for=for_("RosRobotDown"),
     )
 
@@ -136,7 +137,7 @@ def notification(webhook: WebhookReceiver, status: str, timeout: float, **labels
     return alert
 
 
-def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_component_alerts(
+def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_other_alerts(
     tmp_path: Path, dds_domain: int, capsys: pytest.CaptureFixture[str]
 ) -> None:
     profile = PROFILES[PROFILE_NAME]
@@ -166,15 +167,9 @@ def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_component_al
                 explained_failures(webhook, prometheus, exporter),
             ):
                 flipped_at = received_at_level(exporter, 2, timeout=FLIP_AT + SLACK)
-                fired = notification(
-                    webhook,
-                    "firing",
-                    limits.error,
-                    alertname="RosComponentError",
-                    robot=ROBOT,
-                    component=COMPONENT,
-                )
+                fired = notification(webhook, "firing", limits.error, alertname="RosRobotError", robot=ROBOT)
                 assert fired.labels["severity"] == "critical" and fired.path == "/fleet-critical"
+                assert fired.annotations["message"] == f"/Laser: Error; {COMPONENT}: No scans received"
 
                 stopped_at = robot_went_down(exporter)
                 robot_down = notification(
@@ -184,18 +179,13 @@ def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_component_al
 
                 recovered_at = received_at_level(exporter, 0, timeout=limits.error + SLACK)
                 resolved = notification(
-                    webhook,
-                    "resolved",
-                    limits.resolved,
-                    alertname="RosComponentError",
-                    robot=ROBOT,
-                    component=COMPONENT,
+                    webhook, "resolved", limits.resolved, alertname="RosRobotError", robot=ROBOT
                 )
 
                 inhibited = wait_for(
                     lambda: stale_alerts(alertmanager.alerts(), DOWN_ROBOT),
                     limits.stale,
-                    message=f"{DOWN_ROBOT}'s RosComponentStale alerts in Alertmanager",
+                    message=f"{DOWN_ROBOT}'s RosRobotStale in Alertmanager",
                 )
                 assert all(alert["status"]["state"] == "suppressed" for alert in inhibited), inhibited
                 assert all(alert["status"]["inhibitedBy"] for alert in inhibited), inhibited
@@ -247,11 +237,11 @@ def robot_went_down(exporter: Exporter) -> float:
 
 
 def stale_alerts(alerts: list[dict[str, Any]], robot: str) -> list[dict[str, Any]]:
-    """Alertmanager's RosComponentStale alerts for `robot`."""
+    """Alertmanager's RosRobotStale alerts for `robot`."""
     return [
         alert
         for alert in alerts
-        if alert["labels"]["alertname"] == "RosComponentStale" and alert["labels"].get("robot") == robot
+        if alert["labels"]["alertname"] == "RosRobotStale" and alert["labels"].get("robot") == robot
     ]
 
 
@@ -301,25 +291,24 @@ def test_battery_error_notifies_with_its_message_and_a_link_to_the_robot_rendere
                     webhook,
                     "firing",
                     FLIP_AT + SLACK + limits.error,
-                    alertname="RosComponentError",
+                    alertname="RosRobotError",
                     robot=BATTERY_ROBOT,
-                    component=BATTERY,
                 )
                 chat = wait_for(
-                    lambda: chat_text_with(webhook, f"{BATTERY_ROBOT}: Power/Robot Battery ERROR"),
+                    lambda: chat_text_with(webhook, f"{BATTERY_ROBOT} ERROR — "),
                     SLACK,
                     message="the chat notification of the battery",
                 )
-    assert fired.annotations["message"] == "Battery critical"
+    assert fired.annotations["message"] == f"/Power: Error; {BATTERY}: Battery critical"
     assert fired.annotations["status_page_url"] == f"{EXTERNAL_URL}/?robot={BATTERY_ROBOT}"
-    assert "reports ERROR: Battery critical." in fired.annotations["description"]
+    assert fired.labels["external_url"] == EXTERNAL_URL
     # Alertmanager rendered the shipped template into the chat notification: the battery's line and its links.
     lines = chat["text"].splitlines()
-    battery_line = f"{BATTERY_ROBOT}: Power/Robot Battery ERROR — Battery critical"
+    battery_line = f"{BATTERY_ROBOT} ERROR — /Power: Error; {BATTERY}: Battery critical"
     at = lines.index(battery_line)
     assert lines[at + 1 : at + 3] == [
         f"  status page: {EXTERNAL_URL}/?robot={BATTERY_ROBOT}",
-        "  runbook: docs/runbook.md#roscomponenterror",
+        "  runbook: docs/runbook.md#rosroboterror",
     ]
     # The webhook got the same notification as JSON: amtool renders it with the template to the same text.
     assert render_template(tmp_path, CHAT_TEXT, fired.notification) == chat["text"]
@@ -355,3 +344,55 @@ def render_template(tmp_path: Path, text: str, data: dict[str, Any]) -> str:
     )
     assert result.returncode == 0, result.stderr
     return result.stdout
+
+
+def test_a_robot_with_many_failing_components_notifies_once_listing_each_with_its_message(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    profile = PROFILES["suite"]
+    leaves, error, warn = 20, 8, 2
+    fleet = ["--robots=2", f"--components={leaves}", f"--warn={warn}", f"--error={error}"]
+    # The simulator's own design is the oracle: every status of the robot at ERROR, with its message.
+    components = leaf_components(leaves)
+    statuses = aggregated_statuses(components, initial_levels(components, warn, error), set())
+    expected = "; ".join(
+        f"{status.name}: {status.message}"
+        for status in sorted(statuses, key=lambda s: s.name)
+        if status.level == 2
+    )
+    assert expected.count(";") >= error  # eight leaves and their groups
+    with running_webhook() as webhook:
+        alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
+        exporter_args = [
+            f"--fleet.stale-after={profile.stale_after}s",
+            f"--fleet.robot-timeout={profile.robot_timeout}s",
+        ]
+        with (
+            running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
+            running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
+        ):
+            prometheus_config = shipped_config(
+                profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
+            )
+            limits = budget(prometheus_config, alertmanager_config, profile)
+            with (
+                running_prometheus(tmp_path, prometheus_config) as prometheus,
+                running_simulator(tmp_path, dds_domain, *fleet),
+                explained_failures(webhook, prometheus, exporter),
+            ):
+                for robot in ("robot1", "robot2"):
+                    fired = notification(
+                        webhook,
+                        "firing",
+                        FLIP_AT + SLACK + limits.error,
+                        alertname="RosRobotError",
+                        robot=robot,
+                    )
+                    assert fired.annotations["message"] == expected
+                # A few more evaluations and notification rounds: still one alert per robot, and no warning.
+                time.sleep(5)
+                firing = [alert for alert in webhook.alerts() if alert.status == "firing"]
+                assert {(alert.labels["alertname"], alert.labels["robot"]) for alert in firing} == {
+                    ("RosRobotError", "robot1"),
+                    ("RosRobotError", "robot2"),
+                }

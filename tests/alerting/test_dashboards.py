@@ -241,6 +241,12 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
                 timeout=60,
                 message="10s of recorded fleet counts",
             )
+            # The component counts are recorded once a minute (overseer.components), whatever the interval.
+            wait_for(
+                lambda: prometheus.query('fleet:ros_diagnostics_level:count{level="ERROR"} > 0'),
+                timeout=90,
+                message="recorded component counts",
+            )
             yield LiveFleet(exporter, prometheus, recording_rules)
 
 

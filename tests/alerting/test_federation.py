@@ -85,8 +85,8 @@ def test_global_prometheus_sees_every_robot_once_and_alerts(tmp_path: Path, dds_
             robots = {
                 alert["labels"]["robot"]
                 for alert in central.alerts()
-                if alert["labels"]["alertname"] == "RosComponentError" and alert["state"] == "firing"
+                if alert["labels"]["alertname"] == "RosRobotError" and alert["state"] == "firing"
             }
             return robots if robots == set(ROBOTS) else None
 
-        wait_for(firing_error_robots, 90, interval=1.0, message="RosComponentError firing for every robot")
+        wait_for(firing_error_robots, 90, interval=1.0, message="RosRobotError firing for every robot")
