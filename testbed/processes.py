@@ -148,6 +148,10 @@ def wait_until_healthy(exporter: Exporter, timeout: float) -> None:
         try:
             exporter.get("/-/healthy", timeout=1.0)
             return
+        except urllib.error.HTTPError as error:
+            if error.code == 401:  # serving, behind basic auth
+                return
+            time.sleep(0.1)
         except (urllib.error.URLError, ConnectionError, TimeoutError):
             time.sleep(0.1)
     raise TimeoutError(f"exporter not healthy after {timeout}s:\n{exporter.log()}")
