@@ -213,14 +213,30 @@ def natural_order(text: str) -> list[Any]:
 
 @pytest.fixture(scope="module")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
-    """Three simulated robots with one ERROR and one WARN component each; robot1 has a stale one too."""
+    """Three simulated robots with one ERROR and one WARN component each; robot1 has a stale one too.
+
+    robot1 is in maintenance all day, by two recurring windows of the configuration, for the panels that
+    show maintenance.
+    """
     tmp_path = tmp_path_factory.mktemp("dashboards")
     domain = fresh_domain_id()
+    all_day = [
+        {"robots": "robot1", "from": "00:00", "to": "12:00"},
+        {"robots": "robot1", "from": "12:00", "to": "00:00"},
+    ]
+    config_file = tmp_path / "overseer.yml"
+    config_file.write_text(json.dumps({"maintenance": {"windows": all_day}}), encoding="utf-8")
     # A component that goes stale for the stale panels, and level changes for the level-change graphs.
     events = ["--event=2:robot1:/Temp/Sensor1:silence", "--event=3:robot1:/Motor/Motor1:WARN"]
     events += ["--event=5:robot1:/Motor/Motor1:OK"]
     with (
-        running_exporter(tmp_path, domain, "--fleet.stale-after=2s", "--fleet.robot-timeout=3s") as exporter,
+        running_exporter(
+            tmp_path,
+            domain,
+            f"--config.file={config_file}",
+            "--fleet.stale-after=2s",
+            "--fleet.robot-timeout=3s",
+        ) as exporter,
         running_simulator(tmp_path, domain, "--robots=3", "--components=10", *events),
     ):
         config = shipped_config("prometheus.yml", exporter.url, interval="1s")
