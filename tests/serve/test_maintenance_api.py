@@ -203,6 +203,29 @@ def test_writing_without_any_user_configured_is_refused(tmp_path: Path) -> None:
         ({"robots": "r1", "duration": "1h", "comment": "\u0000"}, "comment: expected 1 to 1000 characters"),
         ({"robots": "r1", "duration": "1h", "comment": "x" * 1001}, "comment: expected 1 to 1000 characters"),
         ({"robots": "r1", "duration": "1h", "comment": "x", "author": "mallory"}, "'author': unknown field"),
+        (b'{"robots": "r1", "start": NaN, "duration": "1h", "comment": "x"}', "start: expected unix seconds"),
+        (b'{"robots": "r1", "end": Infinity, "comment": "x"}', "end: expected unix seconds"),
+        (b"[" * 8000 + b"]" * 8000, "body: not a JSON document"),
+        ({"robots": "/", "duration": "1h", "comment": "x"}, "robots: expected a robot name"),
+        ({"robots": "r\u00f6bot", "duration": "1h", "comment": "x"}, "robots: expected a robot name"),
+        ({"robots": "r1" * 200, "duration": "1h", "comment": "x"}, "robots: expected a robot name"),
+        ({"robots": "r1", "duration": "-1h", "comment": "x"}, "duration: expected a duration"),
+        ({"robots": "r1", "duration": 0, "comment": "x"}, "duration: must be a positive duration"),
+        ({"robots": "r1", "start": True, "duration": "1h", "comment": "x"}, "start: expected unix seconds"),
+        (
+            {"robots": "r1", "end": "9999-12-31T23:59:59Z", "comment": "x"},
+            "end: a window lasts at most 31 days",
+        ),
+        (
+            {"robots": "r1", "start": "2999-01-01T00:00:00+00:00", "duration": "1h", "comment": "x"},
+            "start: must be",
+        ),
+        ({"robots": "r1", "duration": "1h", "comment": "   "}, "comment: expected 1 to 1000 characters"),
+        ({"robots": "r1", "duration": "1h", "comment": "a\u2028b"}, "comment: expected 1 to 1000 characters"),
+        (
+            {"robots": "r1", "duration": "1h", "comment": "x\u0085y"},
+            "comment: expected 1 to 1000 characters",
+        ),
     ],
 )
 def test_every_bad_field_is_a_400_naming_it(tmp_path: Path, body: object, message: str) -> None:
@@ -237,3 +260,17 @@ def test_a_recurring_window_of_the_configuration_cannot_be_ended_through_the_api
         status, answer = call(running, f"/api/v1/maintenance/{key}", "DELETE", headers=WRITER)
     assert listing["windows"][0]["recurring"] is True
     assert status == 409 and "recurs as the configuration says" in answer["error"]
+
+
+@pytest.mark.parametrize(
+    "key",
+    ["w99", "w0", "x1", "w1%00", "..%2F..%2Fmetrics", "w" + "9" * 5000, "r0@1", "%FF%FE", "w1%20OR%201=1"],
+)
+def test_ending_a_window_that_does_not_exist_is_a_404_and_changes_nothing(tmp_path: Path, key: str) -> None:
+    with exporter(tmp_path) as running:
+        status, _ = open_window(running, {"robots": "r1", "duration": "1h", "comment": "kept"})
+        assert status == 201
+        ended, answer = call(running, f"/api/v1/maintenance/{key}", "DELETE", None, WRITER)
+        _, listing = call(running, "/api/v1/maintenance", headers=WRITER)
+    assert ended == 404 and answer["error"].startswith("no maintenance window"), answer
+    assert [(w["id"], w["active"]) for w in listing["windows"]] == [("w1", True)]

@@ -12,6 +12,7 @@ import logging
 import math
 import threading
 import time
+import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -114,11 +115,7 @@ class MaintenanceSchedule:
         if end - begins > MAX_LENGTH_SECONDS:
             raise WindowError("end: a window lasts at most 31 days")
         text = comment.strip()
-        if (
-            not text
-            or len(text) > MAX_COMMENT_LENGTH
-            or any(ord(char) < 32 or ord(char) == 127 for char in text)
-        ):
+        if not text or len(text) > MAX_COMMENT_LENGTH or any(_breaks_a_line(char) for char in text):
             raise WindowError(
                 f"comment: expected 1 to {MAX_COMMENT_LENGTH} characters with no control characters"
             )
@@ -219,6 +216,11 @@ class MaintenanceSchedule:
                 self.check()
             except Exception:  # a bug here must not end the windows' events for good
                 log.exception("maintenance check failed")
+
+
+def _breaks_a_line(char: str) -> bool:
+    """Control characters (C0, DEL, C1) and Unicode's line and paragraph separators: a comment is one line."""
+    return unicodedata.category(char) in ("Cc", "Zl", "Zp")
 
 
 def open_schedule(config: MaintenanceConfig, path: str, events: EventSink | None) -> MaintenanceSchedule:

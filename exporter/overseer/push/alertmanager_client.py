@@ -93,5 +93,5 @@ class AlertmanagerClient:
             raise AlertmanagerError(label, f"cannot reach {self._config.url}: {reason}") from None
         try:
             return json.loads(payload) if payload else None
-        except ValueError:
+        except (ValueError, RecursionError):
             raise AlertmanagerError("bad_answer", f"{method} {url}: the answer is not JSON") from None

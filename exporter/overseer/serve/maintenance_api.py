@@ -103,7 +103,7 @@ class MaintenanceApi:
             return 415, {"error": "body: send the window as application/json"}
         try:
             document = json.loads(request.body.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
+        except (UnicodeDecodeError, ValueError, RecursionError):  # RecursionError: nested too deep
             return 400, {"error": "body: not a JSON document"}
         now = self._schedule.clock()
         try:
