@@ -91,7 +91,11 @@ class Exporter(RunningProcess):
 def spawn(
     args: Sequence[str], log_path: Path, env: dict[str, str] | None = None, cwd: Path | None = None
 ) -> subprocess.Popen[bytes]:
-    """Start `args` in its own session with stdout and stderr going to `log_path` (in `cwd` if given)."""
+    """Start `args` in its own session with stdout and stderr going to `log_path`.
+
+    It runs in `cwd`, by default the log's directory (the test's own), so that files a program makes in
+    its working directory (the exporter's event database) never land in the repository.
+    """
     log = log_path.open("wb")
     try:
         return subprocess.Popen(
@@ -100,7 +104,7 @@ def spawn(
             stderr=subprocess.STDOUT,
             env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
             start_new_session=True,
-            cwd=cwd,
+            cwd=log_path.parent if cwd is None else cwd,
         )
     finally:
         log.close()

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pytest
 
+from testbed.paths import REPO
 from testbed.ports import fresh_domain_id
 
 
@@ -11,3 +14,12 @@ from testbed.ports import fresh_domain_id
 def dds_domain() -> int:
     """A DDS domain id of this test's own, so concurrent tests never hear each other."""
     return fresh_domain_id()
+
+
+@pytest.fixture(autouse=True, scope="session")
+def repository_left_clean() -> Iterator[None]:
+    """No test leaves an event database in the repository (every program runs in its test's directory)."""
+    stray = REPO / "overseer-events.db"
+    existed = stray.exists()
+    yield
+    assert existed or not stray.exists(), f"a test made {stray}: run its program in the test's tmp_path"
