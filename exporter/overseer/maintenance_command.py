@@ -11,6 +11,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 from overseer.check.document import CheckError
@@ -106,40 +107,34 @@ class _Client:
         return 0
 
     def start(self, args: argparse.Namespace) -> int:
-        failed = 0
-        for robots in args.robots:
+        def open_window(robots: str) -> dict[str, Any]:
             body: dict[str, Any] = {"robots": robots, "comment": args.comment}
-            for field in ("start", "end", "duration"):
-                if getattr(args, field) is not None:
-                    body[field] = getattr(args, field)
-            try:
-                window = self._call("POST", PATH, body)["window"]
-            except CheckError as error:
-                print(f"overseer maintenance: {robots}: {error}", file=sys.stderr)
-                failed += 1
-                continue
-            if self.raw:
-                print(json.dumps(window, indent=2, ensure_ascii=False))
-            else:
-                print(
-                    f"{window['id']}: {window['robots']} in maintenance from {_time(window['start'])} "
-                    f"until {_time(window['end'])} ({window['author']}: {_one_line(window['comment'])})"
-                )
-        return 1 if failed else 0
+            body.update(
+                {key: getattr(args, key) for key in ("start", "end", "duration") if getattr(args, key)}
+            )
+            return self._call("POST", PATH, body)
+
+        return self._each(args.robots, open_window, _opened_text)
 
     def end(self, keys: list[str]) -> int:
+        return self._each(keys, lambda key: self._call("DELETE", f"{PATH}/{quote_path(key)}"), _ended_text)
+
+    def _each(
+        self,
+        items: list[str],
+        send: Callable[[str], dict[str, Any]],
+        text: Callable[[dict[str, Any]], str],
+    ) -> int:
+        """`send` each item and print the window it answers with; 1 when any was refused (said on stderr)."""
         failed = 0
-        for key in keys:
+        for item in items:
             try:
-                window = self._call("DELETE", f"{PATH}/{quote_path(key)}")["window"]
+                window = send(item)["window"]
             except CheckError as error:
-                print(f"overseer maintenance: {key}: {error}", file=sys.stderr)
+                print(f"overseer maintenance: {item}: {error}", file=sys.stderr)
                 failed += 1
                 continue
-            if self.raw:
-                print(json.dumps(window, indent=2, ensure_ascii=False))
-            else:
-                print(f"{window['id']}: ended at {_time(window['end'])} ({window['robots']})")
+            print(json.dumps(window, indent=2, ensure_ascii=False) if self.raw else text(window))
         return 1 if failed else 0
 
     def _call(self, method: str, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -157,6 +152,17 @@ class _Client:
             error = str(document.get("error", "no explanation"))
             raise CheckError(f"HTTP {answer.status} from {url}: {error}")
         return document
+
+
+def _opened_text(window: dict[str, Any]) -> str:
+    return (
+        f"{window['id']}: {window['robots']} in maintenance from {_time(window['start'])} "
+        f"until {_time(window['end'])} ({window['author']}: {_one_line(window['comment'])})"
+    )
+
+
+def _ended_text(window: dict[str, Any]) -> str:
+    return f"{window['id']}: ended at {_time(window['end'])} ({window['robots']})"
 
 
 def _state(window: dict[str, Any]) -> str:

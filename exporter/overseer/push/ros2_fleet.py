@@ -84,11 +84,8 @@ class FleetDiagnosticsPublisher:
         ros = self._ros
         if ros is None:
             return
-        try:
-            ros.call(self._end)
-        finally:
-            self._ros = None
-            ros_node.release(ros)
+        self._ros = None
+        ros_node.leave(ros, self._end)
 
     def _begin(self) -> None:
         assert self._ros is not None and self._config.fleet_topic is not None

@@ -13,6 +13,7 @@ import os
 import struct
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 from cyclonedds._clayer import ddspy_write
@@ -39,6 +40,8 @@ from overseer.sources.topic_names import AGGREGATED, dds_topic_name
 log = logging.getLogger(__name__)
 
 _STAMP = struct.Struct("<iI")
+SPREAD = 0.8  # share of the period over which one round of paced publications is spread
+_PACE_EVERY = 20  # robots published between two pauses
 ROBOT_ACTIONS = ("stop", "start")
 COMPONENT_ACTIONS = ("silence", "resume")
 
@@ -216,8 +219,7 @@ class FleetSimulator:
 
     def publish_once(self) -> int:
         """Publish every running robot's diagnostics once; returns the number of messages written."""
-        now = time.time()
-        stamp = _STAMP.pack(int(now), int((now % 1) * 1e9))
+        now, stamp = self.stamp_now()
         written = 0
         for robot in self.robots:
             writer = self._writers.get(robot.name)
@@ -230,6 +232,24 @@ class FleetSimulator:
                 written += 1
         self.published += written
         return written
+
+    def paced_robots(self) -> Iterator[SimulatedRobot]:
+        """The robots in order, spread over most of one period.
+
+        Real robots are not in step, and one process standing in for a fleet through one session (Zenoh,
+        rclpy) would overflow its queue if it published them all in one burst.
+        """
+        started, spread, count = time.monotonic(), SPREAD / self.settings.rate, len(self.robots)
+        for index, robot in enumerate(self.robots):
+            if index % _PACE_EVERY == 0 and index:
+                self._stop.wait(max(0.0, started + spread * index / count - time.monotonic()))
+            yield robot
+
+    @staticmethod
+    def stamp_now() -> tuple[float, bytes]:
+        """Now, and now as a message header's stamp (seconds, nanoseconds)."""
+        now = time.time()
+        return now, _STAMP.pack(int(now), int((now % 1) * 1e9))
 
     def payload(self, robot: SimulatedRobot, now: float, stamp: bytes) -> bytes:
         """The robot's serialized array (CDR with its header) stamped `stamp`, varied for `now` if asked."""

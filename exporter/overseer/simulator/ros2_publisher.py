@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import logging
 import os
-import struct
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray as RosDiagnosticArray
@@ -23,8 +22,6 @@ from overseer.sources.ros2 import node as ros_node
 log = logging.getLogger(__name__)
 
 NODE_NAME = "simulated_fleet"
-SPREAD = 0.8  # share of the period over which one round of publications is spread
-_PACE_EVERY = 20
 
 
 class Ros2FleetSimulator(FleetSimulator):
@@ -52,13 +49,9 @@ class Ros2FleetSimulator(FleetSimulator):
 
     def publish_once(self) -> int:
         """Publish every running robot's diagnostics once; returns the number of messages written."""
-        now = time.time()
-        stamp = struct.pack("<iI", int(now), int((now % 1) * 1e9))
+        now, stamp = self.stamp_now()
         written = 0
-        started, spread, count = time.monotonic(), SPREAD / self.settings.rate, len(self.robots)
-        for index, robot in enumerate(self.robots):
-            if index % _PACE_EVERY == 0 and index:
-                self._stop.wait(max(0.0, started + spread * index / count - time.monotonic()))
+        for robot in self.paced_robots():
             publisher = self._publishers.get(robot.name)
             if publisher is None:
                 continue

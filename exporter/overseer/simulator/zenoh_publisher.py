@@ -32,8 +32,6 @@ from overseer.sources.zenoh.keys import (
 log = logging.getLogger(__name__)
 
 NODE_NAME = "diagnostic_aggregator"
-SPREAD = 0.8  # share of the period over which one round of publications is spread
-_PACE_EVERY = 20
 _I64 = struct.Struct("<q")
 
 
@@ -105,15 +103,9 @@ class ZenohFleetSimulator(FleetSimulator):
 
     def publish_once(self) -> int:
         """Publish every running robot's diagnostics once; returns the number of messages written."""
-        now = time.time()
-        stamp = struct.pack("<iI", int(now), int((now % 1) * 1e9))
+        now, stamp = self.stamp_now()
         written = 0
-        # Real robots are not in step: their publications are spread over most of the period, so one
-        # process standing in for a fleet does not overflow its single session's queue in one burst.
-        started, spread, count = time.monotonic(), SPREAD / self.settings.rate, len(self.robots)
-        for index, robot in enumerate(self.robots):
-            if index % _PACE_EVERY == 0 and index:
-                self._stop.wait(max(0.0, started + spread * index / count - time.monotonic()))
+        for robot in self.paced_robots():
             writer = self._zenoh_writers.get(robot.name)
             if writer is None:
                 continue

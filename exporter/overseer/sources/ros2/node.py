@@ -110,6 +110,14 @@ def _close_all() -> None:
         node.close()
 
 
+def leave(node: RosNode, end: Callable[[], None]) -> None:
+    """Run `end` (a user's clean-up of its entities) on the node's thread, then `release` the node."""
+    try:
+        node.call(end)
+    finally:
+        release(node)
+
+
 def release(node: RosNode) -> None:
     """One user less of `node`; the last one closes it."""
     with _lock:

@@ -87,11 +87,8 @@ class Ros2Source:
         ros = self._ros
         if ros is None:
             return
-        try:
-            ros.call(self._end)
-        finally:
-            self._ros = None
-            ros_node.release(ros)
+        self._ros = None
+        ros_node.leave(ros, self._end)
 
     @property
     def followed_topics(self) -> dict[str, bool]:
