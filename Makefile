@@ -36,7 +36,7 @@ test: setup system-deps lint
 
 # The unit and property tests: no server, no middleware, no browser (a couple of minutes).
 test-quick: setup
-	$(BIN)/python -m pytest -m "not servers" $(PYTEST_ARGS)
+	OVERSEER_TEST_QUICK=1 $(BIN)/python -m pytest -m "not servers" $(PYTEST_ARGS)
 
 bench: setup system-deps
 	$(BIN)/python -m bench

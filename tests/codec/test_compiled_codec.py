@@ -30,10 +30,11 @@ from overseer.model import FleetLimits
 from overseer.model.fleet import _intact
 from support import strategies
 from support.codec_paths import codec_path
+from support.examples import examples
 from support.strategies import damaged
 from testbed.processes import running_exporter, wait_for
 
-FUZZ = settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=examples(1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 # name → (wire format, encoder, pure-Python reader, compiled reader's name)
 Encoder = Callable[[DiagnosticArray], bytes]

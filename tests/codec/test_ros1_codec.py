@@ -17,6 +17,7 @@ from overseer.codec.ros1 import decode_diagnostic_array, encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from support import strategies
 from support.codec_paths import CODEC_PATHS, codec_path
+from support.examples import examples
 from testbed.ros1 import genpy
 
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
@@ -219,7 +220,7 @@ def test_lying_string_length_is_a_decode_error() -> None:
         decode_diagnostic_array(bytes(payload))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.binary(max_size=512))
 def test_random_bytes_raise_only_decode_error(data: bytes) -> None:
     for payload in (data, struct.pack("<3I", 0, 0, 0) + data):
@@ -227,7 +228,7 @@ def test_random_bytes_raise_only_decode_error(data: bytes) -> None:
             decode_diagnostic_array(payload)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.binary(min_size=1, max_size=64), st.integers(min_value=0, max_value=200))
 def test_corrupted_payloads_raise_only_decode_error(noise: bytes, offset: int) -> None:
     payload = bytearray(encode_diagnostic_array(EXAMPLES["paper robot"][0]))
@@ -240,7 +241,7 @@ def test_corrupted_payloads_raise_only_decode_error(noise: bytes, offset: int) -
 arrays = strategies.arrays(st.integers(min_value=0, max_value=2**32 - 1))
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(arrays, st.integers(min_value=0, max_value=2**32 - 1))
 def test_roundtrip_of_any_message(array: DiagnosticArray, seq: int) -> None:
     assert decode_diagnostic_array(encode_diagnostic_array(array, seq)) == array

@@ -12,6 +12,7 @@ from overseer.fleet.message_labels import MessageLabels
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
+from support.examples import examples
 from support.rendering import FORMATS, Rendering
 
 
@@ -184,7 +185,7 @@ _steps = st.one_of(
 )
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(
     steps=st.lists(_steps, min_size=1, max_size=12),
     messages=st.builds(

@@ -34,6 +34,7 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.model.shard import Shard
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
+from support.examples import examples
 from support.oracle import parse_openmetrics
 from support.strategies import arrays
 
@@ -240,7 +241,7 @@ def test_workers_share_the_robot_cap_without_exceeding_it(max_robots: int, worke
     assert max(shares) - min(shares) <= 1
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     st.lists(st.tuples(st.sampled_from([f"r{i}" for i in range(12)]), arrays(st.integers(0, 3))), max_size=30)
 )

@@ -33,6 +33,7 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.serve.web_config import load_web_config, web_security_from_dict
 from overseer.sources.ros1.tcpros import TcprosError, decode_header
+from support.examples import examples
 from support.oracle import parse_openmetrics
 from support.rendering import Rendering
 from support.strategies import damaged
@@ -51,8 +52,10 @@ STAMP_SECONDS = {  # builtin_interfaces/Time has int32 seconds; ROS 1 time has u
     "cdr-big-endian": (-(2**31), 2**31 - 1),
     "ros1": (0, 2**32 - 1),
 }
-FUZZ = settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-FUZZ_SLOW = settings(FUZZ, max_examples=300)  # each example renders, parses and compares three expositions
+FUZZ = settings(max_examples=examples(1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ_SLOW = settings(
+    FUZZ, max_examples=examples(300)
+)  # each example renders, parses and compares three expositions
 
 # --- Messages ---
 
@@ -121,7 +124,7 @@ def decodes_or_raises_decode_error(decode: Decoder, payload: bytes) -> None:
 
 
 @pytest.mark.parametrize("codec", list(DECODERS))
-@settings(FUZZ, max_examples=500)
+@settings(FUZZ, max_examples=examples(500))
 @given(data=st.data())
 def test_damaged_payloads_raise_only_decode_error(codec: str, data: st.DataObject) -> None:
     decodes_or_raises_decode_error(DECODERS[codec][0], data.draw(mutated(codec)))
@@ -137,7 +140,7 @@ def test_random_payloads_raise_only_decode_error(codec: str, payload: bytes) -> 
 
 
 @pytest.mark.parametrize("codec", list(DECODERS))
-@settings(FUZZ, max_examples=300)
+@settings(FUZZ, max_examples=examples(300))
 @given(data=st.data())
 def test_every_message_survives_its_codec(codec: str, data: st.DataObject) -> None:
     decode, encode = DECODERS[codec]
@@ -311,7 +314,7 @@ def test_numeric_key_values_keep_nan_and_infinities_as_the_format_writes_them() 
     assert math.isnan(parsed["a"]) and parsed["b"] == math.inf and parsed["c"] == -math.inf
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(fleet=fleets)
 def test_promtool_accepts_any_fleets_exposition(fleet: list[tuple[str, DiagnosticArray]]) -> None:
     fast, *_ = render_both(fed_model(fleet, FleetLimits()))
@@ -358,7 +361,7 @@ def documents(keys: list[str]) -> st.SearchStrategy[Any]:
     )
 
 
-@settings(FUZZ, max_examples=500)
+@settings(FUZZ, max_examples=examples(500))
 @given(
     raw=st.dictionaries(
         st.sampled_from(CONFIG_KEYS) | st.text(max_size=8), documents(CONFIG_KEYS), max_size=6
@@ -373,7 +376,7 @@ def test_any_configuration_mapping_is_a_config_or_one_config_error(raw: dict[str
         assert "\n" not in str(error)
 
 
-@settings(FUZZ, max_examples=500)
+@settings(FUZZ, max_examples=examples(500))
 @given(document=documents(CONFIG_KEYS) | st.text(max_size=200))
 @example(document="[" * 5000)
 @example(document="fleet: {stale_after: " + "9" * 5000 + "}")

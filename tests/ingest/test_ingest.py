@@ -19,6 +19,7 @@ from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, FleetSnapshot
 from support.codec_paths import CODEC_PATHS, codec_path
+from support.examples import examples
 
 
 @pytest.fixture(autouse=True, scope="module", params=CODEC_PATHS)
@@ -243,7 +244,7 @@ def _view(snapshot: FleetSnapshot) -> object:
 
 
 @pytest.mark.parametrize("encoding", sorted(_ENCODERS))
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(sequence=st.lists(st.tuples(_arrays, st.booleans()), min_size=1, max_size=4))
 def test_ingest_agrees_with_decoding_and_applying_every_payload(
     encoding: str, sequence: list[tuple[list[tuple[DiagnosticStatus, ...]], bool]]

@@ -12,6 +12,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.model.events import Event
 from overseer.model.transitions import TransitionDetector
+from support.examples import examples
 
 STALE_AFTER, ROBOT_TIMEOUT, EXPIRE_AFTER = 5.0, 10.0, 60.0
 
@@ -280,7 +281,7 @@ def test_the_model_without_a_listener_sends_nothing() -> None:
     assert fleet.take() == []
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     st.lists(
         st.dictionaries(st.sampled_from(["/a", "/b", "/c"]), st.integers(0, 2), min_size=1),
