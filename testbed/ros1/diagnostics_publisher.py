@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import rospy  # type: ignore[import-not-found]
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # type: ignore[import-not-found]
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
 
