@@ -108,15 +108,22 @@ def spawn(
 
 @contextmanager
 def running_exporter(
-    tmp_path: Path, domain: int | None, *extra_args: str, port: int | None = None, timeout: float = 30.0
+    tmp_path: Path,
+    domain: int | None,
+    *extra_args: str,
+    port: int | None = None,
+    timeout: float = 30.0,
+    command: Sequence[str] | None = None,
+    env: dict[str, str] | None = None,
 ) -> Iterator[Exporter]:
     """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends.
 
-    It runs in `tmp_path`, so its files (the event history's database) stay with the test.
+    It runs in `tmp_path`, so its files (the event history's database) stay with the test. `command` is
+    another installation's `overseer` script, `env` what to change in its environment.
     """
     port = port or free_port()
     args = [
-        *overseer_command(),
+        *(command or overseer_command()),
         "run",
         f"--web.listen-address=127.0.0.1:{port}",
         *([f"--dds.domain={domain}"] if domain is not None else []),
@@ -124,7 +131,7 @@ def running_exporter(
         *extra_args,
     ]
     log_path = tmp_path / f"exporter-{port}.log"
-    exporter = Exporter(spawn(args, log_path, cwd=tmp_path), log_path, f"http://127.0.0.1:{port}")
+    exporter = Exporter(spawn(args, log_path, env, tmp_path), log_path, f"http://127.0.0.1:{port}")
     try:
         wait_until_healthy(exporter, timeout)
         yield exporter
