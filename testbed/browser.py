@@ -55,9 +55,16 @@ def bundled_chromium_version() -> str:
     return str(next(entry["browserVersion"] for entry in entries if entry["name"] == "chromium"))
 
 
-def pair() -> str:
-    """The Playwright and Chromium versions in use, for messages: "playwright X cannot drive chromium Y"."""
-    return f"playwright {metadata.version('playwright')} (made for chromium {bundled_chromium_version()})"
+def cannot_drive(error: Exception) -> str:
+    """What a failure of the pair says: "playwright X (made for chromium B) cannot drive chromium Y: ..."."""
+    bundled, system = bundled_chromium_version(), chromium_version()
+    apart = int(bundled.split(".")[0]) - int(system.split(".")[0])
+    distance = f"{abs(apart)} majors {'older' if apart > 0 else 'newer'}" if apart else "the same major"
+    return (
+        f"playwright {metadata.version('playwright')} (made for chromium {bundled}) cannot drive chromium "
+        f"{system} ({distance}): {error}. Pin a Playwright made for a Chromium nearer Debian's "
+        "(README, Tests)"
+    )
 
 
 @contextmanager
@@ -67,7 +74,7 @@ def headless_chromium() -> Iterator[Browser]:
         try:
             browser = driver.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
         except PlaywrightError as error:
-            raise AssertionError(f"{pair()} cannot drive chromium {chromium_version()}: {error}") from error
+            raise AssertionError(cannot_drive(error)) from error
         try:
             yield browser
         finally:

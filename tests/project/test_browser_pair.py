@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import Error as PlaywrightError
 
-from testbed.browser import bundled_chromium_version, chromium_version, headless_chromium, pair
+from testbed.browser import bundled_chromium_version, cannot_drive, chromium_version, headless_chromium
 
 pytestmark = pytest.mark.servers
 
@@ -39,6 +39,6 @@ def test_playwright_drives_debians_chromium_through_a_page_and_its_scripts() -> 
             total = page.evaluate("() => [...document.querySelectorAll('li')].length + 40")
             page.close()
         except PlaywrightError as error:
-            pytest.fail(f"{pair()} cannot drive chromium {chromium_version()}: {error}")
+            pytest.fail(cannot_drive(error))
     assert names == ["robot1", "robot2"]
     assert total == 42
