@@ -19,6 +19,7 @@ pytestmark = pytest.mark.servers  # needs the test packages, as the tests of rea
 PROGRAMS = [
     "ip",  # iproute2: network namespaces for the fault and unicast-DDS tests
     "ss",  # iproute2: sockets inside a namespace
+    "nsenter",  # util-linux: commands inside a namespace
     "mount",  # the read-only tmpfs of the event store's test
     "umount",
     "git",  # the standalone test lists the tracked files
