@@ -1,12 +1,29 @@
-# The exporter, built from this repository with PyPI packages only.
-FROM python:3.11-slim-bookworm
+# The exporter, built from this repository with PyPI packages only, in two stages: a compiler builds the
+# wheel with the compiled status decoder, and the slim runtime installs it with the locked dependencies.
 
+# Build stage: the full image has gcc and Python's headers. scripts/build-wheel fails unless the C
+# extension built, so the runtime never falls back to the pure-Python decoder.
+FROM python:3.11-bookworm AS build
+RUN python3 -m venv /build
+ENV PATH=/build/bin:$PATH
 WORKDIR /src
 COPY pyproject.toml setup.py README.md ./
+COPY requirements ./requirements
+COPY scripts/build-wheel ./scripts/build-wheel
 COPY exporter ./exporter
-# The slim image has no C compiler: the optional compiled status decoder is not built and the exporter
-# decodes in pure Python (it says so in its log and in overseer_build_info{codec="python"}).
-RUN pip install --no-cache-dir . && rm -rf /src
+RUN scripts/build-wheel /dist
+
+# Runtime stage: no compiler. The locked tools and runtime dependencies (hashes checked), then the wheel
+# with nothing left to resolve; the exporter says overseer_build_info{codec="compiled"}.
+FROM python:3.11-slim-bookworm
+COPY requirements/tools.txt requirements/runtime.txt /tmp/requirements/
+COPY --from=build /dist /tmp/dist
+RUN pip install --no-cache-dir --require-hashes -r /tmp/requirements/tools.txt \
+    && pip install --no-cache-dir --require-hashes -r /tmp/requirements/runtime.txt \
+    && pip install --no-cache-dir --no-deps /tmp/dist/overseer-*.whl \
+    && pip check \
+    && python3 -c "from overseer.codec import compiled; assert compiled.AVAILABLE, 'no compiled decoder'" \
+    && rm -rf /tmp/requirements /tmp/dist
 
 RUN useradd --system --no-create-home overseer \
     && mkdir -p /var/lib/overseer && chown overseer /var/lib/overseer

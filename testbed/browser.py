@@ -1,13 +1,26 @@
-"""Debian's Chromium, headless, driven through Playwright: the status page in a real browser."""
+"""Debian's Chromium, headless, driven through Playwright: the status page in a real browser.
+
+Playwright talks to Chromium over the DevTools protocol as its driver knows it, the protocol of the Chromium
+build it bundles (its browsers.json). Debian's Chromium follows Chrome's stable releases with security
+updates, a few majors from the pinned Playwright's; a pair that stops working fails at launch or at the
+first page, and every failure here names both versions.
+"""
 
 from __future__ import annotations
 
+import json
+import re
 import shutil
+import subprocess
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import metadata
+from pathlib import Path
 
+import playwright
 from playwright.sync_api import Browser, Page, sync_playwright
+from playwright.sync_api import Error as PlaywrightError
 
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -27,11 +40,41 @@ def chromium_path() -> str:
     return path
 
 
+def chromium_version() -> str:
+    """The system Chromium's version, as `chromium --version` prints it (156.0.8078.79)."""
+    output = subprocess.run([chromium_path(), "--version"], capture_output=True, text=True, timeout=60).stdout
+    match = re.search(r"\b(\d+\.\d+\.\d+\.\d+)\b", output)
+    assert match, f"{chromium_path()} --version printed {output!r}"
+    return match[1]
+
+
+def bundled_chromium_version() -> str:
+    """The Chromium build the installed Playwright's driver is made for (never downloaded here)."""
+    browsers = Path(playwright.__file__).parent / "driver" / "package" / "browsers.json"
+    entries = json.loads(browsers.read_text(encoding="utf-8"))["browsers"]
+    return str(next(entry["browserVersion"] for entry in entries if entry["name"] == "chromium"))
+
+
+def cannot_drive(error: Exception) -> str:
+    """What a failure of the pair says: "playwright X (made for chromium B) cannot drive chromium Y: ..."."""
+    bundled, system = bundled_chromium_version(), chromium_version()
+    apart = int(bundled.split(".")[0]) - int(system.split(".")[0])
+    distance = f"{abs(apart)} majors {'older' if apart > 0 else 'newer'}" if apart else "the same major"
+    return (
+        f"playwright {metadata.version('playwright')} (made for chromium {bundled}) cannot drive chromium "
+        f"{system} ({distance}): {error}. Pin a Playwright made for a Chromium nearer Debian's "
+        "(README, Tests)"
+    )
+
+
 @contextmanager
 def headless_chromium() -> Iterator[Browser]:
-    """A headless Chromium for the block, closed after it."""
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+    """A headless Chromium for the block, closed after it; a failed launch names both versions."""
+    with sync_playwright() as driver:
+        try:
+            browser = driver.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+        except PlaywrightError as error:
+            raise AssertionError(cannot_drive(error)) from error
         try:
             yield browser
         finally:

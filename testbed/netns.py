@@ -2,6 +2,9 @@
 
 Addresses are private /30s in 10.213.0.0/16, configured only on the pair, so nothing leaves the
 machine. The namespace, and with it both ends of the pair, is deleted when the block ends.
+
+Commands run inside it through `nsenter --net`, which joins its network and nothing else: `ip -n` and
+`ip netns exec` also remount / as a slave, which fails where / is not a mount point (a chroot).
 """
 
 from __future__ import annotations
@@ -14,13 +17,20 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 _counter = itertools.count(1)
+NETNS_DIR = "/run/netns"  # where `ip netns add` names the namespaces
 
 
-def ip(*args: str) -> None:
-    """Run `ip` with `args`, failing with its message."""
-    result = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+def in_namespace(name: str, args: Sequence[str]) -> list[str]:
+    """`args` as a command that runs in network namespace `name`."""
+    return ["nsenter", f"--net={NETNS_DIR}/{name}", *args]
+
+
+def ip(*args: str, inside: str | None = None) -> None:
+    """Run `ip` with `args` (in namespace `inside` if given), failing with its message."""
+    command = ["ip", *args] if inside is None else in_namespace(inside, ["ip", *args])
+    result = subprocess.run(command, capture_output=True, text=True, timeout=30)
     if result.returncode != 0:
-        raise RuntimeError(f"ip {' '.join(args)}: {result.stderr.strip()}")
+        raise RuntimeError(f"{' '.join(command)}: {result.stderr.strip()}")
 
 
 @dataclass(frozen=True)
@@ -35,7 +45,7 @@ class VethNamespace:
 
     def command(self, args: Sequence[str]) -> list[str]:
         """`args` as a command that runs inside the namespace."""
-        return ["ip", "netns", "exec", self.name, *args]
+        return in_namespace(self.name, args)
 
     def cut(self) -> None:
         """Take the link down: nothing passes either way."""
@@ -65,14 +75,14 @@ def veth_namespace(multicast: bool = True) -> Iterator[VethNamespace]:
         ip("link", "set", namespace.inside, "netns", namespace.name)
         ip("addr", "add", f"{namespace.outside_address}/30", "dev", namespace.outside)
         ip("link", "set", namespace.outside, "up")
-        inside = ("-n", namespace.name)
-        ip(*inside, "addr", "add", f"{namespace.inside_address}/30", "dev", namespace.inside)
-        ip(*inside, "link", "set", namespace.inside, "up")
-        ip(*inside, "link", "set", "lo", "up")
+        inside = namespace.name
+        ip("addr", "add", f"{namespace.inside_address}/30", "dev", namespace.inside, inside=inside)
+        ip("link", "set", namespace.inside, "up", inside=inside)
+        ip("link", "set", "lo", "up", inside=inside)
         if not multicast:
             ip("link", "set", namespace.outside, "multicast", "off")
-            ip(*inside, "link", "set", namespace.inside, "multicast", "off")
-            ip(*inside, "link", "set", "lo", "multicast", "off")
+            ip("link", "set", namespace.inside, "multicast", "off", inside=inside)
+            ip("link", "set", "lo", "multicast", "off", inside=inside)
         yield namespace
     finally:
         subprocess.run(["ip", "link", "del", namespace.outside], capture_output=True, timeout=30)

@@ -117,17 +117,19 @@ def running_exporter(
     *extra_args: str,
     port: int | None = None,
     timeout: float = 30.0,
+    command: Sequence[str] | None = None,
     env: dict[str, str] | None = None,
     loopback_flag: bool = True,
 ) -> Iterator[Exporter]:
     """Run `overseer run` on loopback, joined to `domain` (None: as configured), until the block ends.
 
-    It runs in `tmp_path`, so its files (the event history's database) stay with the test; `env` adds to
-    its environment. `loopback_flag` False leaves out `--dds.loopback-only` (the environment says so).
+    It runs in `tmp_path`, so its files (the event history's database) stay with the test. `command` is
+    another installation's `overseer` script, `env` what to add to its environment. `loopback_flag` False
+    leaves out `--dds.loopback-only` (the environment says so).
     """
     port = port or free_port()
     args = [
-        *overseer_command(),
+        *(command or overseer_command()),
         "run",
         f"--web.listen-address=127.0.0.1:{port}",
         *([f"--dds.domain={domain}"] if domain is not None else []),
