@@ -16,6 +16,7 @@ the median and the worst of them over each phase as a share of the group's inter
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import signal
 import statistics
@@ -31,7 +32,7 @@ from typing import Any
 
 import yaml
 
-from bench.common import Row, emit
+from bench.common import Row, emit, tree_cpu_seconds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from testbed.alertmanager import Alertmanager, example_config, running_alertmanager
@@ -45,6 +46,7 @@ SIMULATOR_ROBOTS = 1500  # robots per simulator process, so that each keeps its 
 PROFILES = {"default": "prometheus.yml", "fast": "prometheus-fast.yml"}
 TARGET_SHARE = 10.0  # per cent of the group's interval
 FLOOR_PREFIX = "floor_"
+MACHINE = "the machine, every process"
 _GROUP_METRIC = re.compile(
     r'^(prometheus_rule_group_\w+)\{rule_group="[^;"]*;([^"]+)"\} (\S+)$', re.MULTILINE
 )
@@ -114,15 +116,24 @@ def floor_rules(rule_file: Path, destination: Path) -> Path:
     return destination
 
 
+@dataclass(frozen=True)
+class Fleet:
+    """The exporter and the simulator processes publishing to it."""
+
+    exporter: Exporter
+    simulator_pids: tuple[int, ...]
+
+
 @contextmanager
-def running_fleet(tmp: Path, robots: int) -> Iterator[Exporter]:
+def running_fleet(tmp: Path, robots: int) -> Iterator[Fleet]:
     """An exporter following `robots` simulated robots over loopback DDS, once every robot is up."""
     domain = fresh_domain_id()
     with ExitStack() as stack:
         exporter = stack.enter_context(running_exporter(tmp, domain, "--log.level=warning"))
+        simulators = []
         for index, first in enumerate(range(0, robots, SIMULATOR_ROBOTS)):
             share = min(SIMULATOR_ROBOTS, robots - first)
-            stack.enter_context(
+            simulator = stack.enter_context(
                 running_simulator(
                     tmp,
                     domain,
@@ -134,13 +145,47 @@ def running_fleet(tmp: Path, robots: int) -> Iterator[Exporter]:
                     "--log.level=warning",
                 )
             )
+            simulators.append(simulator.process.pid)
 
         def every_robot_up() -> bool:
             listed = exporter.get_json("/api/v1/robots")["robots"]
             return sum(1 for robot in listed if robot["up"]) == robots
 
         wait_for(every_robot_up, 900, interval=5.0, message=f"{robots} robots up")
-        yield exporter
+        yield Fleet(exporter, tuple(simulators))
+
+
+def machine_cpu_seconds() -> tuple[float, float]:
+    """CPU time of the whole machine so far: busy (every state but idle and iowait), and all."""
+    fields = [int(value) for value in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    ticks = os.sysconf("SC_CLK_TCK")
+    busy = sum(fields) - fields[3] - fields[4]
+    return busy / ticks, sum(fields) / ticks
+
+
+class CpuMeter:
+    """CPU time of named process trees, and of the whole machine, between `start` and `stop`."""
+
+    def __init__(self, pids: dict[str, tuple[int, ...]]) -> None:
+        self._pids = pids
+        self._started: dict[str, float] = {}
+        self._machine = (0.0, 0.0)
+        self._wall = 0.0
+
+    def _readings(self) -> dict[str, float]:
+        return {name: sum(tree_cpu_seconds(pid) for pid in pids) for name, pids in self._pids.items()}
+
+    def start(self) -> None:
+        self._started, self._machine, self._wall = self._readings(), machine_cpu_seconds(), time.monotonic()
+
+    def stop(self) -> dict[str, float]:
+        """Each tree's share of one core over the phase (%), and the machine's busy share of all its cores."""
+        wall = time.monotonic() - self._wall
+        now = self._readings()
+        busy, total = machine_cpu_seconds()
+        shares = {name: 100 * (now[name] - self._started[name]) / wall for name in self._pids}
+        shares[MACHINE] = 100 * (busy - self._machine[0]) / (total - self._machine[1])
+        return shares
 
 
 def notifications_sent(alertmanager: Alertmanager) -> float:
@@ -154,14 +199,28 @@ def notifications_sent(alertmanager: Alertmanager) -> float:
     )
 
 
-def scrape_health(prometheus: Prometheus, seconds: float) -> tuple[float, float]:
-    """The slowest scrape of the exporter over the last `seconds`, and how many scrapes failed."""
+@dataclass(frozen=True)
+class ScrapeHealth:
+    """The exporter's scrapes over a phase: their durations as Prometheus recorded them, and the failed."""
+
+    median: float
+    slowest: float
+    scrapes: int
+    failed: int
+
+
+def scrape_health(prometheus: Prometheus, seconds: float) -> ScrapeHealth:
+    """The scrapes of the exporter over the last `seconds`."""
     window = f"{seconds:.0f}s"
-    slowest = prometheus.query(f'max_over_time(scrape_duration_seconds{{job="overseer"}}[{window}])')
-    failed = prometheus.query(
-        f'count_over_time(up{{job="overseer"}}[{window}]) - sum_over_time(up{{job="overseer"}}[{window}])'
+    (durations,) = prometheus.query(f'scrape_duration_seconds{{job="overseer"}}[{window}]')
+    (ups,) = prometheus.query(f'up{{job="overseer"}}[{window}]')
+    values = [float(value) for _, value in durations["values"]]
+    return ScrapeHealth(
+        statistics.median(values),
+        max(values),
+        len(values),
+        sum(1 for _, value in ups["values"] if float(value) == 0),
     )
-    return float(slowest[0]["value"][1]), float(failed[0]["value"][1])
 
 
 def alert_counts(prometheus: Prometheus) -> dict[str, int]:
@@ -224,10 +283,11 @@ def floor_rows(label: str, phase: Phase) -> list[Row]:
 
 
 def measure_profile(
-    tmp: Path, exporter: Exporter, webhook: WebhookReceiver, robots: int, profile: str, seconds: float
+    tmp: Path, fleet: Fleet, webhook: WebhookReceiver, robots: int, profile: str, seconds: float
 ) -> list[Row]:
     """One profile: the shipped rules alone, then beside their floor in the same Prometheus."""
     label = f"{robots:,} robots, {profile} profile"
+    exporter = fleet.exporter
     directory = tmp / profile
     directory.mkdir()
     received_before = len(webhook.alerts())
@@ -240,7 +300,17 @@ def measure_profile(
         ]
         with running_prometheus(directory, config) as prometheus:
             time.sleep(90.0 if profile == "default" else 45.0)  # alerts past `for:`, first notifications out
+            cpu = CpuMeter(
+                {
+                    "exporter (with its ingest workers)": (exporter.process.pid,),
+                    "simulators": fleet.simulator_pids,
+                    "Prometheus": (prometheus.process.pid,),
+                    "Alertmanager": (alertmanager.process.pid,),
+                }
+            )
+            cpu.start()
             alone = observe(prometheus, seconds)
+            shares = cpu.stop()
             scrapes = scrape_health(prometheus, seconds)
             counts = alert_counts(prometheus)
             sent = notifications_sent(alertmanager)
@@ -255,15 +325,32 @@ def measure_profile(
     robots_notified = len({alert.labels.get("robot") for alert in received if alert.status == "firing"})
     return [
         *target_rows(label, alone),
+        Row("alert rules", f"{label}: median scrape of the exporter", scrapes.median, "s"),
         Row(
             "alert rules",
             f"{label}: slowest scrape of the exporter",
-            scrapes[0],
+            scrapes.slowest,
             "s",
             f"< {timeout:.0f}",
-            scrapes[0] < timeout,
+            scrapes.slowest < timeout,
         ),
-        Row("alert rules", f"{label}: failed scrapes of the exporter", scrapes[1], "", "0", scrapes[1] == 0),
+        Row(
+            "alert rules",
+            f"{label}: failed scrapes of the exporter, of {scrapes.scrapes}",
+            scrapes.failed,
+            "",
+            "0",
+            scrapes.failed == 0,
+        ),
+        *(
+            Row(
+                "alert rules",
+                f"{label}: CPU, {name}",
+                share,
+                "% of its cores" if name == MACHINE else "% of a core",
+            )
+            for name, share in shares.items()
+        ),
         Row("alert rules", f"{label}: alerts firing", counts.get("firing", 0), "alerts"),
         Row("alert rules", f"{label}: alerts pending", counts.get("pending", 0), "alerts"),
         Row("alert rules", f"{label}: Alertmanager notifications sent", sent, "notifications"),
@@ -283,10 +370,10 @@ def main() -> None:
     with (
         tempfile.TemporaryDirectory() as tmp_name,
         running_webhook() as webhook,
-        running_fleet(Path(tmp_name), args.robots) as exporter,
+        running_fleet(Path(tmp_name), args.robots) as fleet,
     ):
         for profile in args.profiles.split(","):
-            rows += measure_profile(Path(tmp_name), exporter, webhook, args.robots, profile, args.seconds)
+            rows += measure_profile(Path(tmp_name), fleet, webhook, args.robots, profile, args.seconds)
             print(f"{profile} profile measured", file=sys.stderr, flush=True)
     emit(rows)
 

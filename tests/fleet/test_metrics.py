@@ -10,6 +10,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from overseer.codec import compiled
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.fleet.metric_values import numeric_value
+from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS
@@ -228,6 +229,39 @@ def test_a_component_back_to_ok_loses_its_status_message_series() -> None:
     recovered = PAPER_FLEET["robot1"][1]._replace(level=0, message="Normal")
     model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0], recovered)), "dds")
     assert ("robot1", "/Temp/Sensor1") not in status_messages(rendering)
+
+
+def status_message_levels(rendering: Rendering) -> dict[tuple[str, str], str]:
+    """(robot, component) → level label of every status-message sample, checked against its component's."""
+    levels: dict[tuple[str, str], float] = {}
+    found = {}
+    for family in text_string_to_metric_families(rendering.fast().decode()):
+        for sample in family.samples:
+            component = (sample.labels.get("robot", ""), sample.labels.get("component", ""))
+            if sample.name == "ros_diagnostics_level":
+                levels[component] = sample.value
+            elif sample.name == "ros_diagnostics_status_message":
+                assert Level[sample.labels["level"]] == levels[component], sample
+                found[component] = sample.labels["level"]
+    return found
+
+
+def test_status_message_series_carry_the_component_level_now_stale_included() -> None:
+    rendering, model, clock = fleet_rendering(PAPER_FLEET, messages=MessageLabels("all"))
+    assert status_message_levels(rendering) == {
+        ("robot1", "/Power/Robot Battery"): "OK",
+        ("robot1", "/Temp/Sensor1"): "WARN",
+        ("site_a/robot7", "/Camera/Cam1"): "ERROR",
+    }
+    # robot1's sensor is missing from its next message, robot7 sends none: both STALE after stale_after.
+    clock.now += 6
+    model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0],)), "dds")
+    assert status_message_levels(rendering) == {
+        ("robot1", "/Power/Robot Battery"): "OK",
+        ("robot1", "/Temp/Sensor1"): "STALE",
+        ("site_a/robot7", "/Camera/Cam1"): "STALE",
+    }
+    assert status_messages(rendering)[("robot1", "/Temp/Sensor1")] == "High temperature"
 
 
 @pytest.mark.parametrize(

@@ -75,14 +75,15 @@ class OracleCollector(Collector):
                 add(contract.LAST_MESSAGE, [robot.name], robot.last_message)
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
-                add(contract.LEVEL, labels, float(snapshot.component_level(robot, key, component, up)))
+                level = snapshot.component_level(robot, key, component, up)
+                add(contract.LEVEL, labels, float(level))
                 if self._level_changes:
                     add(contract.LEVEL_CHANGES, labels, float(component.level_changes))
                 for value_key, number in numbers.pairs(component.values):
                     add(contract.VALUE, (*labels, value_key), number)
                 message = self._messages.label(component)
                 if message is not None:
-                    add(contract.STATUS_MESSAGE, (*labels, message), 1.0)
+                    add(contract.STATUS_MESSAGE, (*labels, level.name, message), 1.0)
         for (transport, result), count in message_counts(snapshot.message_counts, self._transports):
             add(contract.MESSAGES, [transport, result], float(count))
         for reason in DROP_REASONS:

@@ -156,7 +156,6 @@ def _lines_for(
     # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
     escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
     with_changes = render.level_changes
-    message_prefix = "ros_diagnostics_status_message{"
     robot_label = f'robot="{escape(robot.name)}"'
     reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
     lines = _LinesBuilder(cached)
@@ -181,17 +180,16 @@ def _lines_for(
                 for key, value in pairs(component.values)
             ]
         )
+        level = levels[index]
         message = message_label(component)
         lines.add(
             index,
-            f"ros_diagnostics_level{labels}{_LEVEL_VALUES[levels[index]]}\n".encode(),
+            f"ros_diagnostics_level{labels}{_LEVEL_VALUES[level]}\n".encode(),
             f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode()
             if with_changes
             else b"",
             values.encode(),
-            b""
-            if message is None
-            else f'{message_prefix}{identity},message="{message}",{robot_label}}} 1.0\n'.encode(),
+            b"" if message is None else _status_message_line(identity, level, message, robot_label),
         )
     level_lines, changes, values_lines, message_lines, offsets = lines.finish(len(levels))
     # A component missing from the latest message renders by its own time: never copied (None).
@@ -274,6 +272,14 @@ class _LinesBuilder:
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
+
+
+def _status_message_line(identity: str, level: Level, message: str, robot_label: str) -> bytes:
+    """A component's ros_diagnostics_status_message line: its level now, and its escaped message label."""
+    return (
+        f'ros_diagnostics_status_message{{{identity},level="{level.name}",'
+        f'message="{message}",{robot_label}}} 1.0\n'
+    ).encode()
 
 
 class _RenderCache:

@@ -1,9 +1,10 @@
 """Status messages as a label: the one bounded exception to "messages are never labels".
 
-`ros_diagnostics_status_message{robot, component, hardware_id, message} 1` lets an alert rule pull a
-component's message into its annotations. A label value that changes makes a new series, so the series
-exists only for the components chosen by `mode` (by default those whose robot reports them not OK), and
-its message is cut to `length` characters.
+`ros_diagnostics_status_message{robot, component, hardware_id, level, message} 1` lets an alert rule pull a
+component's message into its annotations; `level` (the component's level now, as `ros_diagnostics_level`
+has it) lets the rule select only the messages at its alert's level. A label value that changes makes a new
+series, so the series exists only for the components chosen by `mode` (by default those whose robot
+reports them not OK), and its message is cut to `length` characters.
 """
 
 from __future__ import annotations

@@ -64,9 +64,10 @@ VALUE = MetricFamily(
 STATUS_MESSAGE = MetricFamily(
     "ros_diagnostics_status_message",
     "gauge",
-    "A component's status message as a label, cut to metrics.message_label_length; always 1. "
+    "A component's status message as a label, cut to metrics.message_label_length, with its level now "
+    "(OK, WARN, ERROR, STALE: ros_diagnostics_level's); always 1. "
     "Only for the components metrics.message_labels chooses (default: reported not OK).",
-    (*_COMPONENT, "message"),
+    (*_COMPONENT, "level", "message"),
 )
 MESSAGES = MetricFamily(
     "overseer_messages",
