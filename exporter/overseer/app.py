@@ -63,6 +63,8 @@ class Exporter:
 
     def __post_init__(self) -> None:
         config = self.config
+        # First: a web configuration that cannot load is a configuration error that must touch nothing.
+        security = load_web_config(config.web.config_file)
         if config.events.enabled:
             self.history = EventHistory(config.events, config.log_format == "json")
         events = None if self.history is None else self.history.store.add
@@ -90,7 +92,6 @@ class Exporter:
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
-        security = load_web_config(config.web.config_file)
         answer_events = events_route(None if self.history is None else self.history.store)
         maintenance_api = MaintenanceApi(
             self.maintenance, config.maintenance.writers, config.web.enable_maintenance_api

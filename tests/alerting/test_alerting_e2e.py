@@ -206,7 +206,9 @@ def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_other_alerts
         )
     assert limits.error_for <= error_latency <= limits.error
     assert resolved_latency <= limits.resolved
-    assert profile.robot_timeout + limits.down_for <= down_latency <= limits.down
+    # A robot that leaves the domain is down when its writer goes, before robot_timeout runs out: `for:` is
+    # the only wait that must always pass.
+    assert limits.down_for <= down_latency <= limits.down
 
 
 @contextmanager

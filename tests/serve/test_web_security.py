@@ -189,8 +189,10 @@ def test_run_with_a_bad_web_config_exits_2_with_one_line(tmp_path: Path) -> None
         capture_output=True,
         text=True,
         timeout=60,
+        cwd=tmp_path,
     )
     assert result.returncode == 2
+    assert not (tmp_path / "overseer-events.db").exists()  # a configuration error opens nothing
     assert result.stderr.splitlines() == [
         f"overseer run: configuration error: web.config_file {str(path)!r}: tls_server_config.cert_file, "
         f"key_file: cannot load {str(tmp_path / 'nowhere.crt')!r} with {str(tmp_path / 'nowhere.key')!r}: "
