@@ -28,7 +28,7 @@ from typing import Any
 import pytest
 
 from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_components
-from testbed.alertmanager import example_config, running_alertmanager
+from testbed.alertmanager import Alertmanager, example_config, running_alertmanager
 from testbed.paths import REPO
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
 from testbed.prometheus import (
@@ -129,6 +129,45 @@ def received_at_level(exporter: Exporter, level: int, timeout: float) -> float:
     return float(found["last_update"])
 
 
+@dataclass
+class Pipeline:
+    """A profile's alert path on test servers, and what its configuration makes each alert wait."""
+
+    alertmanager: Alertmanager
+    exporter: Exporter
+    limits: Budget
+
+
+@contextmanager
+def alert_pipeline(
+    tmp_path: Path,
+    dds_domain: int,
+    profile: Profile,
+    webhook: WebhookReceiver,
+    alertmanager_config: dict[str, Any],
+    *exporter_flags: str,
+) -> Iterator[Pipeline]:
+    """Alertmanager, the exporter and Prometheus with the profile's shipped config, until the block ends."""
+    exporter_args = [
+        f"--fleet.stale-after={profile.stale_after}s",
+        f"--fleet.robot-timeout={profile.robot_timeout}s",
+        *exporter_flags,
+    ]
+    with (
+        running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
+        running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
+    ):
+        prometheus_config = shipped_config(
+            profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
+        )
+        limits = budget(prometheus_config, alertmanager_config, profile)
+        with (
+            running_prometheus(tmp_path, prometheus_config) as prometheus,
+            explained_failures(webhook, prometheus, exporter),
+        ):
+            yield Pipeline(alertmanager, exporter, limits)
+
+
 def notification(webhook: WebhookReceiver, status: str, timeout: float, **labels: str) -> ReceivedAlert:
     """The first `status` notification with `labels`, waiting for it up to `timeout`."""
     alert: ReceivedAlert = wait_for(
@@ -141,31 +180,17 @@ def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_other_alerts
     tmp_path: Path, dds_domain: int, capsys: pytest.CaptureFixture[str]
 ) -> None:
     profile = PROFILES[PROFILE_NAME]
-    exporter_args = [
-        f"--fleet.stale-after={profile.stale_after}s",
-        f"--fleet.robot-timeout={profile.robot_timeout}s",
-    ]
     with running_webhook() as webhook:
         alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
-        with (
-            running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
-            running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
-        ):
-            prometheus_config = shipped_config(
-                profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
-            )
-            limits = budget(prometheus_config, alertmanager_config, profile)
+        with alert_pipeline(tmp_path, dds_domain, profile, webhook, alertmanager_config) as pipeline:
+            exporter, limits = pipeline.exporter, pipeline.limits
             events = [
                 f"--event={FLIP_AT}:{ROBOT}:{COMPONENT}:ERROR",
                 f"--event={FLIP_AT + round(limits.error)}:{ROBOT}:{COMPONENT}:OK",
                 f"--event={FLIP_AT}:{DOWN_ROBOT}:stop",
             ]
             fleet = ["--robots=2", "--components=5", "--warn=0", "--error=0", *events]
-            with (
-                running_prometheus(tmp_path, prometheus_config) as prometheus,
-                running_simulator(tmp_path, dds_domain, *fleet),
-                explained_failures(webhook, prometheus, exporter),
-            ):
+            with running_simulator(tmp_path, dds_domain, *fleet):
                 flipped_at = received_at_level(exporter, 2, timeout=FLIP_AT + SLACK)
                 fired = notification(webhook, "firing", limits.error, alertname="RosRobotError", robot=ROBOT)
                 assert fired.labels["severity"] == "critical" and fired.path == "/fleet-critical"
@@ -183,7 +208,7 @@ def test_error_notifies_then_resolves_and_a_down_robot_inhibits_its_other_alerts
                 )
 
                 inhibited = wait_for(
-                    lambda: stale_alerts(alertmanager.alerts(), DOWN_ROBOT),
+                    lambda: stale_alerts(pipeline.alertmanager.alerts(), DOWN_ROBOT),
                     limits.stale,
                     message=f"{DOWN_ROBOT}'s RosRobotStale in Alertmanager",
                 )
@@ -263,11 +288,6 @@ def test_battery_error_notifies_with_its_message_and_a_link_to_the_robot_rendere
         (critical,) = [r for r in alertmanager_config["receivers"] if r["name"] == "fleet-critical"]
         chat_config = {"api_url": f"{webhook.url}/chat", "title": CHAT_TITLE, "text": CHAT_TEXT}
         critical["slack_configs"] = [chat_config]
-        exporter_args = [
-            f"--fleet.stale-after={profile.stale_after}s",
-            f"--fleet.robot-timeout={profile.robot_timeout}s",
-            f"--web.external-url={EXTERNAL_URL}",
-        ]
         fleet = [
             "--robots=1",
             "--components=5",
@@ -277,30 +297,29 @@ def test_battery_error_notifies_with_its_message_and_a_link_to_the_robot_rendere
             f"--event={FLIP_AT}:{BATTERY_ROBOT}:{BATTERY}:ERROR",
         ]
         with (
-            running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
-            running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
+            alert_pipeline(
+                tmp_path,
+                dds_domain,
+                profile,
+                webhook,
+                alertmanager_config,
+                "--web.external-url=" + EXTERNAL_URL,
+            ) as pipeline,
+            running_simulator(tmp_path, dds_domain, *fleet),
         ):
-            prometheus_config = shipped_config(
-                profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
+            limits = pipeline.limits
+            fired = notification(
+                webhook,
+                "firing",
+                FLIP_AT + SLACK + limits.error,
+                alertname="RosRobotError",
+                robot=BATTERY_ROBOT,
             )
-            limits = budget(prometheus_config, alertmanager_config, profile)
-            with (
-                running_prometheus(tmp_path, prometheus_config) as prometheus,
-                running_simulator(tmp_path, dds_domain, *fleet),
-                explained_failures(webhook, prometheus, exporter),
-            ):
-                fired = notification(
-                    webhook,
-                    "firing",
-                    FLIP_AT + SLACK + limits.error,
-                    alertname="RosRobotError",
-                    robot=BATTERY_ROBOT,
-                )
-                chat = wait_for(
-                    lambda: chat_text_with(webhook, f"{BATTERY_ROBOT} ERROR — "),
-                    SLACK,
-                    message="the chat notification of the battery",
-                )
+            chat = wait_for(
+                lambda: chat_text_with(webhook, f"{BATTERY_ROBOT} ERROR — "),
+                SLACK,
+                message="the chat notification of the battery",
+            )
     assert fired.annotations["message"] == f"/Power: Error; {BATTERY}: Battery critical"
     assert fired.annotations["status_page_url"] == f"{EXTERNAL_URL}/?robot={BATTERY_ROBOT}"
     assert fired.labels["external_url"] == EXTERNAL_URL
@@ -365,36 +384,24 @@ def test_a_robot_with_many_failing_components_notifies_once_listing_each_with_it
     assert expected.count(";") >= error  # eight leaves and their groups
     with running_webhook() as webhook:
         alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
-        exporter_args = [
-            f"--fleet.stale-after={profile.stale_after}s",
-            f"--fleet.robot-timeout={profile.robot_timeout}s",
-        ]
         with (
-            running_alertmanager(tmp_path, alertmanager_config) as alertmanager,
-            running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
+            alert_pipeline(tmp_path, dds_domain, profile, webhook, alertmanager_config) as pipeline,
+            running_simulator(tmp_path, dds_domain, *fleet),
         ):
-            prometheus_config = shipped_config(
-                profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
-            )
-            limits = budget(prometheus_config, alertmanager_config, profile)
-            with (
-                running_prometheus(tmp_path, prometheus_config) as prometheus,
-                running_simulator(tmp_path, dds_domain, *fleet),
-                explained_failures(webhook, prometheus, exporter),
-            ):
-                for robot in ("robot1", "robot2"):
-                    fired = notification(
-                        webhook,
-                        "firing",
-                        FLIP_AT + SLACK + limits.error,
-                        alertname="RosRobotError",
-                        robot=robot,
-                    )
-                    assert fired.annotations["message"] == expected
-                # A few more evaluations and notification rounds: still one alert per robot, and no warning.
-                time.sleep(5)
-                firing = [alert for alert in webhook.alerts() if alert.status == "firing"]
-                assert {(alert.labels["alertname"], alert.labels["robot"]) for alert in firing} == {
-                    ("RosRobotError", "robot1"),
-                    ("RosRobotError", "robot2"),
-                }
+            limits = pipeline.limits
+            for robot in ("robot1", "robot2"):
+                fired = notification(
+                    webhook,
+                    "firing",
+                    FLIP_AT + SLACK + limits.error,
+                    alertname="RosRobotError",
+                    robot=robot,
+                )
+                assert fired.annotations["message"] == expected
+            # A few more evaluations and notification rounds: still one alert per robot, and no warning.
+            time.sleep(5)
+            firing = [alert for alert in webhook.alerts() if alert.status == "firing"]
+            assert {(alert.labels["alertname"], alert.labels["robot"]) for alert in firing} == {
+                ("RosRobotError", "robot1"),
+                ("RosRobotError", "robot2"),
+            }
