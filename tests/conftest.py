@@ -16,10 +16,10 @@ def dds_domain() -> int:
     return fresh_domain_id()
 
 
-@pytest.fixture(autouse=True, scope="session")
-def repository_left_clean() -> Iterator[None]:
-    """No test leaves an event database in the repository (every program runs in its test's directory)."""
+@pytest.fixture(autouse=True)
+def repository_left_clean(request: pytest.FixtureRequest) -> Iterator[None]:
+    """No test leaves an event database in the repository (a configuration error must open nothing)."""
     stray = REPO / "overseer-events.db"
     existed = stray.exists()
     yield
-    assert existed or not stray.exists(), f"a test made {stray}: run its program in the test's tmp_path"
+    assert existed or not stray.exists(), f"{request.node.nodeid} made {stray}"

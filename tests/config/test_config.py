@@ -157,7 +157,7 @@ def test_simulate_with_a_namespace_dds_cannot_carry_exits_nonzero() -> None:
 
 
 @pytest.mark.servers
-def test_run_on_a_busy_port_exits_nonzero_with_one_line() -> None:
+def test_run_on_a_busy_port_exits_nonzero_with_one_line(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
@@ -167,6 +167,7 @@ def test_run_on_a_busy_port_exits_nonzero_with_one_line() -> None:
             capture_output=True,
             text=True,
             timeout=60,
+            cwd=tmp_path,  # the exporter has opened its event database by the time the port is refused
         )
     assert result.returncode == 1
     assert result.stderr.splitlines() == [
