@@ -162,9 +162,15 @@ def test_ingest_workers_are_nodes_of_their_own_and_share_the_robots(tmp_path: Pa
             45,
             message="all robots",
         )
-        names = sorted(name for name, _ in observer.call(observer.node.get_node_names_and_namespaces))
+        exporter_nodes = {"overseer", "overseer_ingest_0", "overseer_ingest_1"}
+
+        def graph_has_every_exporter_node() -> bool:
+            # The observer learns the graph by discovery too: a node may reach it after the robots did.
+            names = {name for name, _ in observer.call(observer.node.get_node_names_and_namespaces)}
+            return exporter_nodes <= names
+
+        wait_for(graph_has_every_exporter_node, 30, message=f"nodes {sorted(exporter_nodes)} in the graph")
         robots_seen = [robot["robot"] for robot in exporter.get_json("/api/v1/robots")["robots"]]
-    assert {"overseer", "overseer_ingest_0", "overseer_ingest_1"} <= set(names)
     assert sorted(robots_seen) == sorted(f"w{index}" for index in range(6))  # each once
 
 
