@@ -203,15 +203,19 @@ class FleetSimulator:
         self.close()
 
     def wait_for_subscribers(self, timeout: float) -> bool:
-        """Wait until every robot's writer has a matched reader; False when `timeout` passed first."""
+        """Wait until `every_robot_subscribed`; False when `timeout` passed first."""
         deadline = time.monotonic() + timeout
         while not self._stop.is_set() and time.monotonic() < deadline:
-            wanted = self.settings.subscribers
-            if all(len(writer.get_matched_subscriptions()) >= wanted for writer in self._writers.values()):
+            if self.every_robot_subscribed():
                 return True
             self._stop.wait(0.1)
         log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)
         return False
+
+    def every_robot_subscribed(self) -> bool:
+        """Whether every robot's writer has `settings.subscribers` matched readers."""
+        wanted = self.settings.subscribers
+        return all(len(writer.get_matched_subscriptions()) >= wanted for writer in self._writers.values())
 
     def stop(self) -> None:
         """Ask `run` to return."""

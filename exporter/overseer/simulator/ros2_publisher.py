@@ -8,9 +8,7 @@ round are spread over most of the period, as real robots are not in step.
 
 from __future__ import annotations
 
-import logging
 import os
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray as RosDiagnosticArray
 from rclpy.publisher import Publisher
@@ -18,8 +16,6 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from overseer.simulator.publisher import FleetSimulator, SimulatedRobot, SimulatorSettings
 from overseer.sources.ros2 import node as ros_node
-
-log = logging.getLogger(__name__)
 
 NODE_NAME = "simulated_fleet"
 
@@ -60,16 +56,10 @@ class Ros2FleetSimulator(FleetSimulator):
         self.published += written
         return written
 
-    def wait_for_subscribers(self, timeout: float) -> bool:
-        """Wait until every robot's publisher has a subscription; False when `timeout` passed first."""
-        deadline = time.monotonic() + timeout
-        while not self._stop.is_set() and time.monotonic() < deadline:
-            wanted = self.settings.subscribers
-            if all(publisher.get_subscription_count() >= wanted for publisher in self._publishers.values()):
-                return True
-            self._stop.wait(0.1)
-        log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)
-        return False
+    def every_robot_subscribed(self) -> bool:
+        """Whether every robot's publisher has `settings.subscribers` subscriptions."""
+        wanted = self.settings.subscribers
+        return all(publisher.get_subscription_count() >= wanted for publisher in self._publishers.values())
 
     def close(self) -> None:
         """Destroy every publisher and leave the graph."""

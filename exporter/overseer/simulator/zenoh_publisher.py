@@ -11,7 +11,6 @@ are shared with it.
 from __future__ import annotations
 
 import json
-import logging
 import struct
 import time
 from dataclasses import dataclass, field
@@ -28,8 +27,6 @@ from overseer.sources.zenoh.keys import (
     node_token,
     publisher_token,
 )
-
-log = logging.getLogger(__name__)
 
 NODE_NAME = "diagnostic_aggregator"
 _I64 = struct.Struct("<q")
@@ -121,15 +118,9 @@ class ZenohFleetSimulator(FleetSimulator):
         self.published += written
         return written
 
-    def wait_for_subscribers(self, timeout: float) -> bool:
-        """Wait until every robot's publisher has a matching subscriber; False when `timeout` passed first."""
-        deadline = time.monotonic() + timeout
-        while not self._stop.is_set() and time.monotonic() < deadline:
-            if all(writer.publisher.matching_status for writer in self._zenoh_writers.values()):
-                return True
-            self._stop.wait(0.1)
-        log.warning("not every robot has a subscriber after %gs; publishing anyway", timeout)
-        return False
+    def every_robot_subscribed(self) -> bool:
+        """Whether every robot's publisher has a matching subscriber."""
+        return all(writer.publisher.matching_status for writer in self._zenoh_writers.values())
 
     def close(self) -> None:
         """Undeclare every publisher and token and close the session."""
