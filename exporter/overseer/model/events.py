@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from overseer.levels import Level
 
@@ -18,16 +18,7 @@ EventKind = Literal[
     "maintenance_start",
     "maintenance_end",
 ]
-EVENT_KINDS: tuple[EventKind, ...] = (
-    "level",
-    "robot_down",
-    "robot_up",
-    "appeared",
-    "missing",
-    "expired",
-    "maintenance_start",
-    "maintenance_end",
-)
+EVENT_KINDS: tuple[EventKind, ...] = get_args(EventKind)
 _LEVEL_NAMES = {level: level.name for level in Level}
 
 
