@@ -9,7 +9,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from overseer import __version__
@@ -211,16 +211,14 @@ def _add_ros2_flags(parser: argparse.ArgumentParser) -> None:
 
 def _ros2_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The `ros2.*` keys given as flags; any of them turns the ROS 2 transport on."""
-    overrides: dict[str, Any] = {"ros2.enabled": True} if args.ros2 else {}
-    for flag, key in (
-        ("ros2_node_name", "node_name"),
-        ("ros2_domain", "domain"),
-        ("ros2_fleet_topic", "fleet_topic"),
-    ):
-        value = getattr(args, flag)
-        if value is not None:
-            overrides[f"ros2.{key}"] = value
-    return overrides
+    enabled: dict[str, Any] = {"ros2.enabled": True} if args.ros2 else {}
+    return enabled | _given_flags(args, "ros2", ("node_name", "domain", "fleet_topic"))
+
+
+def _given_flags(args: argparse.Namespace, section: str, keys: Iterable[str]) -> dict[str, Any]:
+    """`section.key` for each of the keys whose flag (`--section.key`) was given."""
+    values = {key: getattr(args, f"{section}_{key}", None) for key in keys}
+    return {f"{section}.{key}": value for key, value in values.items() if value is not None}
 
 
 def _add_icinga2_flags(parser: argparse.ArgumentParser) -> None:
@@ -399,10 +397,7 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if args.log_level is not None:
         overrides["log_level"] = args.log_level
     overrides.update(_event_overrides(args))
-    for flag, _, _ in _ICINGA2_FLAGS:
-        value = getattr(args, f"icinga2_{flag.replace('-', '_')}", None)
-        if value is not None:
-            overrides[f"icinga2.{flag.replace('-', '_')}"] = value
+    overrides.update(_given_flags(args, "icinga2", (flag.replace("-", "_") for flag, _, _ in _ICINGA2_FLAGS)))
     return overrides
 
 
@@ -443,18 +438,7 @@ def _ros1_robot_overrides(named: list[str], masters: list[str]) -> list[dict[str
 
 def _zenoh_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The `zenoh.*` keys given as flags; any of them turns the Zenoh transport on."""
-    overrides: dict[str, Any] = {}
-    for flag, key in (
-        ("zenoh_connect", "connect"),
-        ("zenoh_listen", "listen"),
-        ("zenoh_mode", "mode"),
-        ("zenoh_domain", "domain"),
-        ("zenoh_config", "config"),
-    ):
-        value = getattr(args, flag)
-        if value is not None:
-            overrides[f"zenoh.{key}"] = value
-    return overrides
+    return _given_flags(args, "zenoh", ("connect", "listen", "mode", "domain", "config"))
 
 
 def _wait_for_signal() -> None:
