@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import playwright
 from playwright.sync_api import Browser, Page, sync_playwright
@@ -88,6 +89,25 @@ class PageErrors:
         """Start collecting `page`'s errors."""
         self.errors: list[str] = []
         page.on("pageerror", lambda error: self.errors.append(str(error)))
+
+
+@contextmanager
+def error_free_page(browser: Browser, **context_options: Any) -> Iterator[Page]:
+    """A page in its own browser context for the block (1280x900 unless told); fails on any script error."""
+    context = browser.new_context(**{"viewport": {"width": 1280, "height": 900}, **context_options})
+    page = context.new_page()
+    errors = PageErrors(page)
+    try:
+        yield page
+    finally:
+        context.close()
+    assert errors.errors == []
+
+
+def open_page(page: Page, url: str, view: str = "fleet") -> None:
+    """Go to `url` and wait until the status page shows `view` (fleet or robot)."""
+    page.goto(url)
+    page.wait_for_selector(f"body[data-view={view}]")
 
 
 def refreshes(page: Page) -> int:

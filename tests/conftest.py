@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import pytest
 
 from testbed.paths import REPO
 from testbed.ports import fresh_domain_id
+
+if TYPE_CHECKING:
+    from playwright.sync_api import Browser
 
 
 @pytest.fixture
@@ -23,3 +27,12 @@ def repository_left_clean(request: pytest.FixtureRequest) -> Iterator[None]:
     existed = stray.exists()
     yield
     assert existed or not stray.exists(), f"{request.node.nodeid} made {stray}"
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    """One headless Chromium for the module (Playwright is imported only by the tests that use it)."""
+    from testbed.browser import headless_chromium
+
+    with headless_chromium() as browser:
+        yield browser

@@ -19,7 +19,7 @@ from playwright.sync_api import Browser, Page, expect
 
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from testbed.browser import PageErrors, headless_chromium, wait_for_refresh
+from testbed.browser import error_free_page, open_page, wait_for_refresh
 from testbed.dds_writer import raw_diagnostics_writer
 from testbed.ports import fresh_domain_id
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
@@ -96,29 +96,11 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Exporter]:
         yield exporter
 
 
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    """One headless Chromium for the module."""
-    with headless_chromium() as browser:
-        yield browser
-
-
 @pytest.fixture
 def page(browser: Browser) -> Iterator[Page]:
     """A fresh browser page (its own context: no state shared between tests); no script error allowed."""
-    context = browser.new_context(viewport={"width": 1280, "height": 900})
-    page = context.new_page()
-    errors = PageErrors(page)
-    try:
+    with error_free_page(browser) as page:
         yield page
-    finally:
-        context.close()
-    assert errors.errors == []
-
-
-def open_page(page: Page, url: str, view: str = "fleet") -> None:
-    page.goto(url)
-    page.wait_for_selector(f"body[data-view={view}]")
 
 
 def shown_robots(page: Page) -> list[str]:

@@ -17,20 +17,13 @@ import pytest
 from playwright.sync_api import Browser, Page, expect
 
 from overseer.app import Exporter
-from testbed.browser import PageErrors, headless_chromium
+from testbed.browser import error_free_page, open_page
 from testbed.in_process import call, in_process_exporter, publish
 
 pytestmark = pytest.mark.servers
 
 HASH = bcrypt.hashpw(b"secret", bcrypt.gensalt(rounds=4)).decode()
 HOSTILE_COMMENT = '<img src=x onerror=window.pwned=1> swap & "fix"'
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    """One headless Chromium for the module."""
-    with headless_chromium() as browser:
-        yield browser
 
 
 @pytest.fixture
@@ -52,16 +45,8 @@ def running(tmp_path: Path) -> Iterator[Exporter]:
 
 
 def page_as(browser: Browser, user: str) -> Iterator[Page]:
-    context = browser.new_context(
-        viewport={"width": 1280, "height": 900}, http_credentials={"username": user, "password": "secret"}
-    )
-    page = context.new_page()
-    errors = PageErrors(page)
-    try:
+    with error_free_page(browser, http_credentials={"username": user, "password": "secret"}) as page:
         yield page
-    finally:
-        context.close()
-    assert errors.errors == []
 
 
 @pytest.fixture
@@ -74,11 +59,6 @@ def alice(browser: Browser) -> Iterator[Page]:
 def bob(browser: Browser) -> Iterator[Page]:
     """A page logged in as bob, who may only read them."""
     yield from page_as(browser, "bob")
-
-
-def open_page(page: Page, url: str, view: str = "fleet") -> None:
-    page.goto(url)
-    page.wait_for_selector(f"body[data-view={view}]")
 
 
 def test_a_writer_starts_a_window_from_the_page_and_its_robots_are_shown_in_maintenance_not_red(
