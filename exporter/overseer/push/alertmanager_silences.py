@@ -22,12 +22,12 @@ from overseer.maintenance.effects import CREATED, REMOVED, EffectStats
 from overseer.maintenance.schedule import MaintenanceSchedule
 from overseer.model.maintenance import Window
 from overseer.push.alertmanager_client import AlertmanagerClient, AlertmanagerError
+from overseer.push.retry import BACKOFF_MAX, Retry
 
 log = logging.getLogger(__name__)
 
 TARGET = "alertmanager"
 TICK_SECONDS = 0.5
-BACKOFF_MIN, BACKOFF_MAX = 1.0, 30.0
 
 
 class AlertmanagerSilences:
@@ -50,9 +50,7 @@ class AlertmanagerSilences:
         self._thread: threading.Thread | None = None
         self._synced_revision = -1
         self._verify_at = 0.0
-        self._retry_at = 0.0
-        self._backoff = BACKOFF_MIN
-        self._last_error = ""
+        self._retry = Retry("Alertmanager silences", log)
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -70,12 +68,12 @@ class AlertmanagerSilences:
         while not self._stopping.is_set():
             now = self._clock()
             due = self._schedule.revision != self._synced_revision or now >= self._verify_at
-            if due and now >= self._retry_at:
+            if due and self._retry.due(now):
                 try:
                     self.sync(now)
                 except Exception:  # never take the exporter down; try again after a pause
                     log.exception("Alertmanager silences: unexpected error")
-                    self._retry_at = now + BACKOFF_MAX
+                    self._retry.pause(now + BACKOFF_MAX)
             self._stopping.wait(TICK_SECONDS)
 
     def sync(self, now: float) -> None:
@@ -110,10 +108,7 @@ class AlertmanagerSilences:
         except AlertmanagerError as error:
             self._failed(error, now, windows, made)
             return
-        if self._last_error:
-            log.info("Alertmanager at %s takes silences again", self._config.url)
-            self._last_error = ""
-        self._backoff = BACKOFF_MIN
+        self._retry.succeeded(f"Alertmanager at {self._config.url} takes silences again")
         self._synced_revision = revision
         self.stats.synced(time.time(), 0)
 
@@ -145,11 +140,7 @@ class AlertmanagerSilences:
                 f"Alertmanager at {self._config.url} refused the credentials (HTTP 401): "
                 "check alertmanager.username and alertmanager.password_file"
             )
-        if text != self._last_error:
-            log.warning("Alertmanager silences failed, retrying in %gs: %s", self._backoff, text)
-        self._last_error = text
-        self._retry_at = now + self._backoff
-        self._backoff = min(self._backoff * 2, BACKOFF_MAX)
+        self._retry.failed(text, now)
 
 
 def silence_for(window: Window) -> dict[str, Any]:

@@ -26,13 +26,13 @@ from overseer.push.icinga2_downtimes import Icinga2Downtimes
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
+from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
 log = logging.getLogger(__name__)
 
 TICK_SECONDS = 0.25
 BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the fleet again
-BACKOFF_MIN, BACKOFF_MAX = 1.0, 30.0
 SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 # Active checks only run once a pushed result's TTL ran out; then `dummy` says the exporter is silent.
@@ -78,9 +78,7 @@ class Icinga2Push:
         self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
         self._orphans: dict[str, float] = {}  # our hosts found at start, not yet seen: → deletion time
         self._to_delete: set[str] = set()
-        self._retry_at = 0.0
-        self._backoff = BACKOFF_MIN
-        self._last_error = ""
+        self._retry = Retry("Icinga 2 push", log)
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -101,7 +99,7 @@ class Icinga2Push:
                 self.step()
             except Exception:  # the push must never take the exporter down; it tries again next tick
                 log.exception("Icinga 2 push: unexpected error")
-                self._retry_at = self._clock() + self._backoff
+                self._retry.pause(self._clock() + self._retry.backoff)
             self._stopping.wait(TICK_SECONDS)
 
     def step(self) -> None:
@@ -112,7 +110,7 @@ class Icinga2Push:
         except FleetPartUnavailable as error:
             # A robot missing from a partial snapshot is no robot gone: wait for the whole fleet.
             log.info("Icinga 2 push: not queueing this tick, %s", error)
-        if now >= self._retry_at:
+        if self._retry.due(now):
             self._deliver(now)
         self.stats.set_pending(len(self._urgent) + len(self._pending))
 
@@ -182,10 +180,7 @@ class Icinga2Push:
         except Icinga2Error as error:
             self._failed(error, now)
             return
-        if self._last_error:
-            log.info("Icinga 2 at %s accepts results again", self._config.url)
-            self._last_error = ""
-        self._backoff = BACKOFF_MIN
+        self._retry.succeeded(f"Icinga 2 at {self._config.url} accepts results again")
 
     def _failed(self, error: Icinga2Error, now: float) -> None:
         self.stats.failed(error.reason)
@@ -195,11 +190,7 @@ class Icinga2Push:
                 f"Icinga 2 at {self._config.url} refused the credentials (HTTP 401): check icinga2.username "
                 "and icinga2.password_file, or the client certificate"
             )
-        if text != self._last_error:
-            log.warning("Icinga 2 push failed, retrying in %gs: %s", self._backoff, text)
-        self._last_error = text
-        self._retry_at = now + self._backoff
-        self._backoff = min(self._backoff * 2, BACKOFF_MAX)
+        self._retry.failed(text, now)
 
     def _find_own_objects(self, now: float) -> dict[str, set[str]]:
         """The hosts and services this exporter made earlier (before a restart of either side).
