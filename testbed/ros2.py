@@ -8,12 +8,19 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TypeVar
 
-from overseer.sources.ros2.node import RosNode
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
 from testbed.paths import TESTBED
 from testbed.processes import RunningProcess, spawn
 
@@ -55,12 +62,48 @@ def running_robots(tmp_path: Path, domain: int, *robots: tuple[str, ...]) -> Ite
             robot.stop()
 
 
+T = TypeVar("T")
+
+
+class Observer:
+    """A node of the test process's own, spun by rclpy's executor in a thread.
+
+    It sees the graph and hears topics as any ROS 2 node does, independently of the exporter's code.
+    """
+
+    def __init__(self, name: str, domain: int) -> None:
+        self._context = Context()
+        rclpy.init(context=self._context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node(name, context=self._context, start_parameter_services=False, enable_rosout=False)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self.node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name=f"observer-{name}", daemon=True)
+        self._thread.start()
+
+    def call(self, function: Callable[[], T]) -> T:
+        """`function()`: rclpy's node may be used from any thread while its executor spins."""
+        return function()
+
+    def close(self) -> None:
+        """Stop spinning and leave the graph."""
+        self._stop.set()
+        self._thread.join(timeout=10)
+        self._executor.shutdown()
+        self.node.destroy_node()  # type: ignore[no-untyped-call]
+        self._context.try_shutdown()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self._context.ok():
+            self._executor.spin_once(timeout_sec=0.1)
+
+
 @contextmanager
-def graph_node(domain: int, name: str = "observer") -> Iterator[RosNode]:
+def graph_node(domain: int, name: str = "observer") -> Iterator[Observer]:
     """A node of the test process's own in `domain`, on loopback, for the length of the block."""
     previous = {key: os.environ.get(key) for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE",)}
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    node = RosNode(name, domain)
+    node = Observer(name, domain)
     try:
         yield node
     finally:

@@ -116,7 +116,7 @@ try:
     compiled.use_compiled(True)
 except RuntimeError as error:
     refused = "not built" in str(error)
-level = model.snapshot().robots[0].components[("/a", "hw")].level
+level = model.snapshot().robots[0].components[("/a", "")].level
 print(compiled.AVAILABLE, compiled.implementation(), refused, int(level), "not built" in compiled.describe())
 """
     env = {k: v for k, v in os.environ.items() if k != compiled.PURE_PYTHON_VARIABLE}

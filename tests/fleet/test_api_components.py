@@ -46,19 +46,23 @@ def fleet() -> tuple[FleetModel, ManualClock]:
     """Three robots: site_a/r1 failing its laser, site_a/r2 warning, robot3 all OK."""
     clock = ManualClock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=30), clock=clock)
-    model.apply(
-        "site_a/r1",
-        array((2, "/Laser/Front", "No scans received", "sick1"), (0, "/Power/Battery", "Charge OK", "")),
-        "dds",
-    )
-    model.apply(
-        "site_a/r2",
-        array((1, "/Power/Battery", "Low charge", "bms2"), (0, "/Laser/Front", "Scanning", "")),
-        "dds",
-    )
-    model.apply(
-        "robot3", array((0, "/Power/Battery", "Charge OK", ""), (0, "/Camera/Cam1", "Streaming", "")), "dds"
-    )
+    for second in range(2):  # twice, a second apart: every robot's period is known
+        clock.now += second
+        model.apply(
+            "site_a/r1",
+            array((2, "/Laser/Front", "No scans received", "sick1"), (0, "/Power/Battery", "Charge OK", "")),
+            "dds",
+        )
+        model.apply(
+            "site_a/r2",
+            array((1, "/Power/Battery", "Low charge", "bms2"), (0, "/Laser/Front", "Scanning", "")),
+            "dds",
+        )
+        model.apply(
+            "robot3",
+            array((0, "/Power/Battery", "Charge OK", ""), (0, "/Camera/Cam1", "Streaming", "")),
+            "dds",
+        )
     return model, clock
 
 
@@ -87,7 +91,7 @@ def test_no_filter_lists_every_component_worst_first_then_by_robot_and_name(
         "level": 2,
         "state": "ERROR",
         "message": "No scans received",
-        "last_update": 1_700_000_000.0,
+        "last_update": 1_700_000_001.0,
     }
 
 
@@ -224,7 +228,9 @@ def test_fleet_summary_counts_levels_now_and_ranks_the_robot_by_severity() -> No
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=30), clock=clock)
     model.apply("mixed", array((1, "/a", "", ""), (2, "/b", "", "")), "dds")
     model.apply("gone", array((2, "/a", "", "")), "dds")
-    clock.now += 6
+    clock.now += 1
+    model.apply("mixed", array((1, "/a", "", ""), (2, "/b", "", "")), "dds")  # its period is known: 1 s
+    clock.now += 5
     model.apply("mixed", array((1, "/a", "", "")), "dds")  # /b is missing from it now: STALE, not ERROR
     model.register("silent", "dds")
     clock.now += 25  # gone is down (31 s), mixed is not (25 s) but all its components are stale now

@@ -112,16 +112,17 @@ def test_fast_exposition_equals_the_oracle_in_both_formats_through_changes_stale
 
 
 def test_a_lost_publisher_renders_its_robot_down_and_a_returning_one_up() -> None:
-    model, _ = fleet()
+    model, clock = fleet()
     rendering = Rendering(model)
     robot = 'robot0/quote"d'
     label = b'ros_diagnostics_robot_up{robot="robot0/quote\\"d"} '
     assert label + b"1.0" in rendering.fast()
-    model.set_publisher_alive(robot, False)
+    model.publisher_left(robot)
     fast = assert_equal_in_both_formats(rendering)
     assert label + b"0.0" in fast
     assert b'ros_diagnostics_level{component="/Motor",hardware_id="m1",robot="robot0/quote\\"d"} 3.0' in fast
-    model.set_publisher_alive(robot, True)
+    clock.now += 1
+    assert model.touch(robot, "dds")  # its next message
     assert label + b"1.0" in assert_equal_in_both_formats(rendering)
 
 
@@ -181,7 +182,7 @@ _steps = st.one_of(
     st.tuples(st.just("advance"), st.sampled_from([1.0, 3.0, 6.0, 11.0, 61.0])),
     st.tuples(st.just("expire")),
     st.tuples(st.just("forget"), _robots),
-    st.tuples(st.just("alive"), _robots, st.booleans()),
+    st.tuples(st.just("left"), _robots),
 )
 
 
@@ -211,8 +212,8 @@ def test_cached_exposition_equals_the_oracle_in_both_formats_through_any_changes
                 model.expire()
             case ("forget", str(robot)):
                 model.forget_topic(robot, "t")
-            case ("alive", str(robot), bool(alive)):
-                model.set_publisher_alive(robot, alive)
+            case ("left", str(robot)):
+                model.publisher_left(robot)
         assert_equal_in_both_formats(rendering)
 
 

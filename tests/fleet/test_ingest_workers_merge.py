@@ -223,7 +223,7 @@ def test_joined_snapshot_crosses_a_pipe_and_judges_as_one_model() -> None:
         pickle.loads(pickle.dumps(replace(s, robots=tuple(portable_robots(s)))))
         for s in (m.snapshot() for m in fleet.parts)
     ]
-    joined = merge_snapshots(sent, LIMITS, whole.taken_at)
+    joined = merge_snapshots(sent, LIMITS, whole.taken_at, whole.generated_at)
     assert sorted(r.name for r in joined.robots) == sorted(r.name for r in whole.robots)
     by_name = {robot.name: robot for robot in joined.robots}
     for robot in whole.robots:

@@ -53,8 +53,10 @@ def fleet_rendering(
 ) -> tuple[Rendering, FleetModel, Clock]:
     clock = Clock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
-    for robot, items in statuses.items():
-        model.apply(robot, DiagnosticArray(0, 0, "", tuple(items)), "dds")
+    for second in range(2):  # twice, a second apart: every robot's period is known
+        clock.now += second
+        for robot, items in statuses.items():
+            model.apply(robot, DiagnosticArray(0, 0, "", tuple(items)), "dds")
     return Rendering(model, value_keys, messages=messages, external_url=external_url), model, clock
 
 

@@ -127,7 +127,7 @@ def test_a_robot_changed_by_another_topic_takes_the_next_payload_whole() -> None
     agg(cdr_payload(2, *statuses(("/a", "1.0"), ("/b", "2.5"))))
     components = model.snapshot().robots[0].components
     assert components[("/a", "")].values == (("voltage", "1.0"),)
-    assert components[("/a", "")].topic == "rt/r1/diagnostics_agg"
+    assert components[("/a", "")].feed == "rt/r1/diagnostics_agg"
 
 
 def test_undecodable_payload_is_counted_and_the_next_good_one_applies() -> None:
@@ -236,7 +236,19 @@ def reference_decode(wire: WireFormat, payload: bytes) -> DiagnosticArray:
 
 
 def _view(snapshot: FleetSnapshot) -> object:
-    return [(r.name, r.last_message, dict(r.components), r.latest, r.missing) for r in snapshot.robots], (
+    """What both paths must agree on: every record and judgement, but the revisions that count changes."""
+    robots = [
+        (
+            r.name,
+            r.last_message,
+            dict(r.components),
+            [feed._replace(revision=0) for feed in r.feeds],
+            r.missing,
+            r.up_since,
+        )
+        for r in snapshot.robots
+    ]
+    return robots, (
         dict(snapshot.message_counts),
         dict(snapshot.dropped_statuses),
         snapshot.truncated_strings,
@@ -271,3 +283,20 @@ def test_ingest_agrees_with_decoding_and_applying_every_payload(
             fast.forget_topic("r1", "t")
             plain.forget_topic("r1", "t")
         assert _view(fast.snapshot()) == _view(plain.snapshot())
+
+
+def test_feeds_of_one_robot_keep_their_own_layouts_and_skip_their_own_republications() -> None:
+    # Two nodes on one robot's topic, each republishing its own array: neither makes the other decode.
+    model = FleetModel()
+    wire = CountingWire(cdr.WIRE_FORMAT)
+    drive = PayloadIngest(model, "r1", "dds", "rt/diagnostics", wire.format, "rt/diagnostics@drive")
+    camera = PayloadIngest(model, "r1", "dds", "rt/diagnostics", wire.format, "rt/diagnostics@camera")
+    for stamp in range(1, 6):
+        drive(cdr_payload(stamp, *statuses(("drive: a", "1.0"), ("drive: b", "2.0"))))
+        camera(cdr_payload(stamp, *statuses(("camera: c", "3.0"))))
+    assert wire.decoded == ["drive: a", "drive: b", "camera: c"]
+    drive(cdr_payload(6, *statuses(("drive: a", "1.0"), ("drive: b", "2.5"))))
+    assert wire.decoded[3:] == ["drive: b"]
+    robot = model.snapshot().robots[0]
+    assert [feed.name for feed in robot.feeds] == ["rt/diagnostics@drive", "rt/diagnostics@camera"]
+    assert robot.components[("drive: b", "")].values == (("voltage", "2.5"),) and not robot.missing

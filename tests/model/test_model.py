@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.model.state import StaleOverride
 
 
 class ManualClock:
@@ -34,24 +37,47 @@ def make_model(**limits: float) -> tuple[FleetModel, ManualClock]:
     return FleetModel(FleetLimits(**limits), clock=clock), clock  # type: ignore[arg-type]
 
 
+def steady(
+    model: FleetModel,
+    clock: ManualClock,
+    robot: str,
+    *statuses: DiagnosticStatus,
+    feed: str = "",
+    period: float = 1.0,
+) -> None:
+    """The same array twice, `period` apart, on `feed`: the feed's period is known from then on."""
+    model.apply(robot, array(*statuses), "dds", feed=feed)
+    clock.now += period
+    model.apply(robot, array(*statuses), "dds", feed=feed)
+
+
+def levels(model: FleetModel) -> dict[str, Level]:
+    """Component name → level now of the model's first robot."""
+    snapshot = model.snapshot()
+    robot = snapshot.robots[0]
+    up = snapshot.robot_up(robot)
+    return {key[0]: snapshot.component_level(robot, key, c, up) for key, c in robot.components.items()}
+
+
 def test_components_keep_reported_level_message_and_values() -> None:
     model, _ = make_model()
     model.apply("r1", array(status("/Power/Battery", 1, "bms", voltage="11.2")), "dds")
     snapshot = model.snapshot()
     robot = snapshot.find("r1")
     assert robot is not None
-    component = robot.components[("/Power/Battery", "bms")]
-    assert (component.level, component.message, component.values) == (
+    component = robot.components[("/Power/Battery", "")]
+    assert (component.level, component.message, component.hardware_id, component.values) == (
         Level.WARN,
         "/Power/Battery says 1",
+        "bms",
         (("voltage", "11.2"),),
     )
-    assert snapshot.component_level(robot, ("/Power/Battery", "bms"), component, True) is Level.WARN
+    assert snapshot.component_level(robot, ("/Power/Battery", ""), component, True) is Level.WARN
 
 
 def test_robot_level_uses_severity_order() -> None:
     model, clock = make_model(stale_after=5, robot_timeout=30)
-    model.apply("r1", array(status("/a", 1)), "dds")
+    steady(model, clock, "r1", status("/a", 1))
     clock.now += 6
     model.apply("r1", array(status("/b", 0)), "dds")  # /a is now stale, /b fresh
     snapshot = model.snapshot()
@@ -65,7 +91,7 @@ def test_robot_level_uses_severity_order() -> None:
 
 def test_component_goes_stale_after_timeout() -> None:
     model, clock = make_model(stale_after=5, robot_timeout=60)
-    model.apply("r1", array(status("/a", 0), status("/b", 2)), "dds")
+    steady(model, clock, "r1", status("/a", 0), status("/b", 2))
     clock.now += 5
     model.apply("r1", array(status("/a", 0)), "dds")
     clock.now += 0.5
@@ -78,7 +104,7 @@ def test_component_goes_stale_after_timeout() -> None:
 
 def test_silent_robot_is_down_with_every_component_stale() -> None:
     model, clock = make_model(stale_after=5, robot_timeout=10)
-    model.apply("r1", array(status("/a", 2)), "dds")
+    steady(model, clock, "r1", status("/a", 2))
     clock.now += 10
     assert model.snapshot().robot_up(model.snapshot().robots[0])
     clock.now += 0.1
@@ -89,22 +115,23 @@ def test_silent_robot_is_down_with_every_component_stale() -> None:
     assert snapshot.component_level(robot, ("/a", ""), robot.components[("/a", "")], False) is Level.STALE
 
 
-def test_robot_whose_publisher_is_gone_is_down_at_once_and_up_when_it_returns() -> None:
-    model, _ = make_model(stale_after=5, robot_timeout=60)
+def test_robot_whose_publisher_left_is_down_at_once_and_up_only_with_a_message_after_it() -> None:
+    model, clock = make_model(stale_after=5, robot_timeout=60)
     model.apply("r1", array(status("/a", 1)), "zenoh")
-    model.set_publisher_alive("r1", False)
+    clock.now += 1
+    model.publisher_left("r1")
     snapshot = model.snapshot()
     robot = snapshot.robots[0]
-    assert not snapshot.robot_up(robot)
+    assert not snapshot.robot_up(robot) and not robot.publisher_alive
     assert snapshot.robot_level(robot) is Level.STALE
-    model.apply("r1", array(status("/a", 1)), "zenoh")  # a message does not overrule the liveliness
-    model.touch("r1", "zenoh")
+    clock.now += 1  # a new publisher appearing says nothing: only its data does
     assert not model.snapshot().robot_up(model.snapshot().robots[0])
-    model.set_publisher_alive("r1", True)
+    assert model.touch("r1", "zenoh")
     snapshot = model.snapshot()
-    assert snapshot.robot_up(snapshot.robots[0])
+    assert snapshot.robot_up(snapshot.robots[0]) and snapshot.robots[0].publisher_alive
     assert snapshot.robot_level(snapshot.robots[0]) is Level.WARN
-    model.set_publisher_alive("unknown", False)  # nothing to do, nothing created
+    assert snapshot.robots[0].up_since == clock.now
+    model.publisher_left("unknown")  # nothing to do, nothing created
     assert [r.name for r in model.snapshot().robots] == ["r1"]
 
 
@@ -142,9 +169,9 @@ def test_components_are_told_apart_by_hardware_id() -> None:
     model, _ = make_model()
     model.apply("r1", array(status("/Motor", 0, "left"), status("/Motor", 2, "right")), "dds")
     components = model.snapshot().robots[0].components
-    assert {k: c.level for k, c in components.items()} == {
-        ("/Motor", "left"): Level.OK,
-        ("/Motor", "right"): Level.ERROR,
+    assert {k: (c.level, c.hardware_id) for k, c in components.items()} == {
+        ("/Motor", "left"): (Level.OK, "left"),
+        ("/Motor", "right"): (Level.ERROR, "right"),
     }
 
 
@@ -257,3 +284,170 @@ def test_unchanged_components_keep_their_record() -> None:
     after = model.snapshot().robots[0].components
     assert after[("/b", "")] is before[("/b", "")]
     assert after[("/a", "")].values == (("v", "2"),)
+
+
+def test_a_start_up_status_without_hardware_id_and_the_real_one_are_one_component() -> None:
+    # diagnostic_updater's add(): "<node>: <task>" / "Node starting up" with no hardware_id, then the task.
+    model, clock = make_model()
+    model.apply("r1", array(DiagnosticStatus(0, "drive: Motor", "Node starting up", "", ())), "dds")
+    clock.now += 0.2
+    model.apply("r1", array(status("drive: Motor", 2, "m1"), status("drive: Other", 0, "m1")), "dds")
+    clock.now += 1
+    # broadcast() and a later start-up send no hardware_id either: the component keeps the one it had
+    model.apply("r1", array(DiagnosticStatus(1, "drive: Motor", "shutting down", "", ())), "dds")
+    components = model.snapshot().robots[0].components
+    assert list(components) == [("drive: Motor", ""), ("drive: Other", "")]
+    motor = components[("drive: Motor", "")]
+    assert (motor.level, motor.message, motor.hardware_id, motor.level_changes) == (
+        Level.WARN,
+        "shutting down",
+        "m1",
+        2,
+    )
+
+
+def test_a_changed_hardware_id_is_the_same_component_under_its_new_id() -> None:
+    model, _ = make_model()
+    model.apply("r1", array(status("/Lidar", 0, "serial-1")), "dds")
+    model.apply("r1", array(status("/Lidar", 0, "serial-2")), "dds")
+    [(key, lidar)] = model.snapshot().robots[0].components.items()
+    assert key == ("/Lidar", "") and lidar.hardware_id == "serial-2"
+
+
+def test_one_name_with_two_hardware_ids_in_one_array_is_kept_apart_from_then_on() -> None:
+    model, _ = make_model()
+    model.apply("r1", array(status("/Motor", 0, "left")), "dds")
+    model.apply("r1", array(status("/Motor", 0, "left"), status("/Motor", 2, "right")), "dds")
+    assert list(model.snapshot().robots[0].components) == [("/Motor", "left"), ("/Motor", "right")]
+    model.apply("r1", array(status("/Motor", 1, "right")), "dds")  # alone again, still apart
+    model.apply("r1", array(DiagnosticStatus(1, "/Motor", "no id", "", ())), "dds")  # goes to the first
+    components = model.snapshot().robots[0].components
+    assert list(components) == [("/Motor", "left"), ("/Motor", "right")]
+    assert components[("/Motor", "left")].message == "no id"
+    assert components[("/Motor", "right")].level is Level.WARN
+
+
+def test_nodes_sharing_a_robots_topic_each_keep_their_components_fresh() -> None:
+    # Two diagnostic_updater nodes on one robot's /diagnostics: each array holds its own statuses only.
+    model, clock = make_model(stale_after=5, robot_timeout=60)
+    for _ in range(30):
+        model.apply("r1", array(status("drive: Motor", 0)), "dds", "rt/diagnostics", "rt/diagnostics@drive")
+        model.apply(
+            "r1", array(status("camera: Frames", 1)), "dds", "rt/diagnostics", "rt/diagnostics@camera"
+        )
+        clock.now += 1
+    snapshot = model.snapshot()
+    robot = snapshot.robots[0]
+    assert levels(model) == {"drive: Motor": Level.OK, "camera: Frames": Level.WARN}
+    assert [(feed.name, feed.period) for feed in robot.feeds] == [
+        ("rt/diagnostics@drive", 1.0),
+        ("rt/diagnostics@camera", 1.0),
+    ]
+    assert not robot.missing
+    for _ in range(6):  # the camera node stops; the drive node goes on
+        assert model.touch("r1", "dds", "rt/diagnostics@drive")
+        clock.now += 1
+    assert levels(model) == {"drive: Motor": Level.OK, "camera: Frames": Level.STALE}
+
+
+def test_a_slow_producer_is_stale_after_three_of_its_periods_not_after_stale_after() -> None:
+    # ntp_monitor publishes every 10 s when its NTP requests time out.
+    model, clock = make_model(stale_after=5, robot_timeout=10)
+    for _ in range(3):
+        model.apply("r1", array(status("NTP offset", 2)), "dds")
+        for _ in range(10):  # judged every second between two messages: never STALE, robot never down
+            clock.now += 1
+            snapshot = model.snapshot()
+            assert snapshot.robot_up(snapshot.robots[0])
+            assert levels(model) == {"NTP offset": Level.ERROR}
+    robot = model.snapshot().robots[0]
+    assert robot.feeds[0].period == 10.0
+    model.apply("r1", array(status("NTP offset", 2)), "dds")
+    clock.now += 30  # it stops: STALE and down after three periods, 30 s
+    assert levels(model) == {"NTP offset": Level.ERROR}
+    clock.now += 0.1
+    snapshot = model.snapshot()
+    assert levels(model) == {"NTP offset": Level.STALE}
+    assert not snapshot.robot_up(snapshot.robots[0])
+
+
+def test_a_producers_period_is_not_spoiled_by_start_up_arrays_or_forced_updates() -> None:
+    model, clock = make_model(stale_after=5, robot_timeout=10)
+    for name in ("n: a", "n: b", "n: c"):  # add() of three tasks: a one-status array each, at once
+        model.apply("r1", array(DiagnosticStatus(0, name, "Node starting up", "", ())), "dds")
+        clock.now += 0.001
+    whole = array(status("n: a"), status("n: b"), status("n: c"))
+    for _ in range(4):
+        clock.now += 10
+        model.apply("r1", whole, "dds")
+    clock.now += 0.01  # force_update() right after an update
+    model.apply("r1", whole, "dds")
+    assert model.snapshot().robots[0].feeds[0].period == 10.0
+    clock.now += 25
+    assert set(levels(model).values()) == {Level.OK}
+
+
+def test_a_producer_heard_once_is_given_three_times_stale_after() -> None:
+    model, clock = make_model(stale_after=5, robot_timeout=10)
+    model.apply("r1", array(status("/a")), "dds")
+    clock.now += 15
+    assert levels(model) == {"/a": Level.OK}
+    snapshot = model.snapshot()
+    assert snapshot.robot_up(snapshot.robots[0])
+    clock.now += 0.1
+    assert levels(model) == {"/a": Level.STALE}
+
+
+def test_an_override_sets_the_stale_bound_of_the_components_its_pattern_matches() -> None:
+    overrides = (StaleOverride(re.compile("NTP.*"), 60.0), StaleOverride(re.compile("fast: .*"), 2.0))
+    model, clock = make_model(stale_after=5, robot_timeout=600, stale_overrides=overrides)  # type: ignore[arg-type]
+    steady(model, clock, "r1", status("NTP offset"), status("fast: imu"), status("other"))
+    clock.now += 2.5
+    assert levels(model) == {"NTP offset": Level.OK, "fast: imu": Level.STALE, "other": Level.OK}
+    clock.now += 55
+    assert levels(model) == {"NTP offset": Level.OK, "fast: imu": Level.STALE, "other": Level.STALE}
+    clock.now += 3
+    assert levels(model) == {"NTP offset": Level.STALE, "fast: imu": Level.STALE, "other": Level.STALE}
+
+
+def test_a_restarted_node_takes_its_components_over_and_its_old_feed_goes() -> None:
+    model, clock = make_model()
+    steady(model, clock, "r1", status("drive: a"), status("drive: b"), feed="old-writer")
+    clock.now += 1
+    model.apply("r1", array(DiagnosticStatus(0, "drive: a", "Node starting up", "", ())), "dds", feed="new")
+    robot = model.snapshot().robots[0]
+    assert [feed.name for feed in robot.feeds] == ["old-writer", "new"]
+    assert robot.feeds[0].latest == (None, ("drive: b", ""))  # the old one reads its next message whole
+    clock.now += 1
+    model.apply("r1", array(status("drive: a"), status("drive: b")), "dds", feed="new")
+    robot = model.snapshot().robots[0]
+    assert [feed.name for feed in robot.feeds] == ["new"]
+    assert {c.feed for c in robot.components.values()} == {"new"} and not robot.missing
+    assert not model.touch("r1", "dds", "old-writer")
+
+
+def test_a_step_of_the_wall_clock_changes_no_judgement_only_the_dates_reported() -> None:
+    monotonic, wall = ManualClock(), ManualClock()
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10), clock=monotonic, wall_clock=wall)
+    for _ in range(3):
+        model.apply("r1", array(status("/a", 1)), "dds")
+        monotonic.now += 1
+        wall.now += 1
+    before = model.snapshot()
+    for step in (120.0, -3600.0):
+        wall.now += step  # NTP steps the clock, or a VM resumes
+        snapshot = model.snapshot()
+        robot = snapshot.robots[0]
+        assert snapshot.robot_up(robot) and snapshot.robot_level(robot) is Level.WARN
+        assert robot.last_message_wall == before.robots[0].last_message_wall  # dated when it arrived
+    model.apply("r1", array(status("/a", 1)), "dds")
+    assert model.snapshot().robots[0].last_message_wall == wall.now
+
+
+def test_feeds_beyond_the_cap_are_dropped_and_counted() -> None:
+    model, _ = make_model(max_feeds_per_robot=2)
+    for feed in ("w1", "w2", "w3"):
+        model.apply("r1", array(status(f"/{feed}")), "dds", feed=feed)
+    snapshot = model.snapshot()
+    assert [feed.name for feed in snapshot.robots[0].feeds] == ["w1", "w2"]
+    assert snapshot.dropped_statuses["feed_limit"] == 1

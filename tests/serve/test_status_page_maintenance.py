@@ -40,7 +40,7 @@ def running(tmp_path: Path) -> Iterator[Exporter]:
         for robot in ("site_a/r1", "site_a/r2", "site_a/r3"):
             publish(exporter, robot, (2, "/Laser", "no scans"), (0, "/Power", "ok"))
         assert exporter.model is not None
-        exporter.model.set_publisher_alive("site_a/r3", False)
+        exporter.model.publisher_left("site_a/r3")
         yield exporter
 
 

@@ -71,8 +71,8 @@ class OracleCollector(Collector):
             up = snapshot.robot_up(robot)
             add(contract.ROBOT_UP, [robot.name], 1.0 if up else 0.0)
             add(contract.ROBOT_LEVEL, [robot.name], float(snapshot.robot_level(robot)))
-            if robot.last_message is not None:
-                add(contract.LAST_MESSAGE, [robot.name], robot.last_message)
+            if robot.last_message_wall is not None:
+                add(contract.LAST_MESSAGE, [robot.name], robot.last_message_wall)
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
                 level = snapshot.component_level(robot, key, component, up)

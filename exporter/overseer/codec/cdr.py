@@ -48,7 +48,7 @@ def read_head(payload: bytes) -> ArrayHead:
     if end < 16:
         raise DecodeError("payload too short for a header")
     sec, nanosec = (_TIME_LE if little else _TIME_BE)(payload, 4)
-    frame_id, pos = _read_string(payload, 12, end, u32)
+    frame_id, pos = read_string(payload, 12, end, u32)
     pos = (pos + 3) & ~3
     if pos + 4 > end:
         raise DecodeError("payload ends before the status sequence")
@@ -63,14 +63,22 @@ def read_head(payload: bytes) -> ArrayHead:
     return ArrayHead(sec, nanosec, frame_id, count, pos, read_status)
 
 
+def byte_order(payload: bytes) -> struct._UnpackFrom:  # type: ignore[name-defined]
+    """The unsigned 32-bit reader of the payload's byte order, from its encapsulation header."""
+    little = _REPRESENTATIONS.get(payload[:2]) if len(payload) >= 4 else None
+    if little is None:
+        raise DecodeError(f"unsupported encapsulation {payload[:2].hex()}")
+    return _U32_LE if little else _U32_BE
+
+
 def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[name-defined]
     def read_status(payload: bytes, pos: int, end: int) -> tuple[DiagnosticStatus, int]:
         if pos >= end:
             raise DecodeError("payload ends inside a status")
         level = payload[pos]
-        name, pos = _read_string(payload, pos + 1, end, u32)
-        message, pos = _read_string(payload, pos, end, u32)
-        hardware_id, pos = _read_string(payload, pos, end, u32)
+        name, pos = read_string(payload, pos + 1, end, u32)
+        message, pos = read_string(payload, pos, end, u32)
+        hardware_id, pos = read_string(payload, pos, end, u32)
         pos = (pos + 3) & ~3
         if pos + 4 > end:
             raise DecodeError("payload ends before a values sequence")
@@ -80,16 +88,19 @@ def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[nam
             raise DecodeError(f"value count {value_count} runs past the payload")
         values: list[tuple[str, str]] = []
         for _ in range(value_count):
-            key, pos = _read_string(payload, pos, end, u32)
-            value, pos = _read_string(payload, pos, end, u32)
+            key, pos = read_string(payload, pos, end, u32)
+            value, pos = read_string(payload, pos, end, u32)
             values.append((key, value))
         return DiagnosticStatus(level, name, message, hardware_id, tuple(values)), pos
 
     return read_status
 
 
-def _read_string(payload: bytes, pos: int, end: int, u32: struct._UnpackFrom) -> tuple[str, int]:  # type: ignore[name-defined]
-    """Read a CDR string at `pos` (aligning first); returns the text and the position after it."""
+def read_string(payload: bytes, pos: int, end: int, u32: struct._UnpackFrom) -> tuple[str, int]:  # type: ignore[name-defined]
+    """Read a CDR string at `pos` (aligning first); returns the text and the position after it.
+
+    Invalid UTF-8 becomes U+FFFD; a string that is not NUL-terminated, or runs past `end`, is a DecodeError.
+    """
     pos = (pos + 3) & ~3
     if pos + 4 > end:
         raise DecodeError("payload ends before a string length")

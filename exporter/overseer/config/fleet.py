@@ -1,4 +1,4 @@
-"""The `fleet:` section (the model's time limits and caps) and `shard`, this exporter's share of the fleet."""
+"""The `fleet:` section (the model's time limits, caps, and how robots are named) and `shard`."""
 
 from __future__ import annotations
 
@@ -7,15 +7,20 @@ from dataclasses import fields
 from typing import Any
 
 from overseer.config.errors import ConfigError
-from overseer.config.parsers import parse_duration
+from overseer.config.parsers import listed, parse_duration, reject_unknown, string, whole_number
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
+from overseer.model.state import StaleOverride
 
-KEYS = {f.name for f in fields(FleetLimits)}
+DEFAULT_NAMESPACE_DEPTH = 1  # /robot_a/drivers/lidar is robot robot_a
+MAX_NAMESPACE_DEPTH = 32
+NAMESPACE_DEPTH_KEY = "robot_namespace_depth"
+KEYS = {f.name for f in fields(FleetLimits)} | {NAMESPACE_DEPTH_KEY}
+_DURATIONS = ("stale_after", "robot_timeout", "expire_after")
 
 
 def fleet_limits(raw: dict[str, Any]) -> FleetLimits:
-    """The section from its mapping: durations, positive caps, and timeouts in their order."""
+    """The section from its mapping: durations, positive caps, overrides, and timeouts in their order."""
     values: dict[str, Any] = {}
     for f in fields(FleetLimits):
         if f.name not in raw:
@@ -26,8 +31,12 @@ def fleet_limits(raw: dict[str, Any]) -> FleetLimits:
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
             values[f.name] = value
-        else:
+        elif f.name in _DURATIONS:
             values[f.name] = parse_duration(raw[f.name], key)
+        elif f.name == "stale_periods":
+            values[f.name] = _stale_periods(raw[f.name])
+        elif f.name == "stale_overrides":
+            values[f.name] = stale_overrides(raw[f.name])
     limits = FleetLimits(**values)
     if limits.robot_timeout < limits.stale_after:
         raise ConfigError(
@@ -40,6 +49,38 @@ def fleet_limits(raw: dict[str, Any]) -> FleetLimits:
             f"got {limits.expire_after:g}s"
         )
     return limits
+
+
+def robot_namespace_depth(raw: dict[str, Any]) -> int:
+    """`fleet.robot_namespace_depth`: how many leading segments of a node's namespace name its robot."""
+    if NAMESPACE_DEPTH_KEY not in raw:
+        return DEFAULT_NAMESPACE_DEPTH
+    return whole_number(raw[NAMESPACE_DEPTH_KEY], f"fleet.{NAMESPACE_DEPTH_KEY}", 0, MAX_NAMESPACE_DEPTH)
+
+
+def stale_overrides(value: object) -> tuple[StaleOverride, ...]:
+    """`fleet.stale_overrides`: a list of `{match: <regular expression>, stale_after: <duration>}`."""
+    overrides = []
+    for index, item in enumerate(listed(value, "fleet.stale_overrides")):
+        key = f"fleet.stale_overrides[{index}]"
+        if not isinstance(item, dict):
+            raise ConfigError(f"{key}: expected a mapping with match and stale_after, got {item!r}")
+        reject_unknown(item, key + ".", {"match", "stale_after"})
+        if "match" not in item or "stale_after" not in item:
+            raise ConfigError(f"{key}: expected both match and stale_after, got {sorted(item)}")
+        pattern = string(item["match"], f"{key}.match")
+        try:
+            compiled = re.compile(pattern)
+        except re.error as error:
+            raise ConfigError(f"{key}.match: {pattern!r} is not a regular expression: {error}") from None
+        overrides.append(StaleOverride(compiled, parse_duration(item["stale_after"], f"{key}.stale_after")))
+    return tuple(overrides)
+
+
+def _stale_periods(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 1 <= value <= 100:
+        raise ConfigError(f"fleet.stale_periods: expected a number from 1 to 100, got {value!r}")
+    return float(value)
 
 
 def parse_shard(value: object, key: str = "shard") -> Shard:

@@ -31,6 +31,7 @@ from overseer.config.alertmanager import AlertmanagerConfig
 from overseer.config.dds import DdsConfig
 from overseer.config.errors import ConfigError
 from overseer.config.events import EventsConfig
+from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.icinga2 import Icinga2Config
 from overseer.config.ingest import IngestConfig
 from overseer.config.maintenance import MaintenanceConfig
@@ -69,6 +70,7 @@ class Config:
     icinga2: Icinga2Config | None = None  # push to Icinga 2 when set
     maintenance: MaintenanceConfig = field(default_factory=MaintenanceConfig)
     alertmanager: AlertmanagerConfig | None = None  # silences for maintenance windows when set
+    robot_namespace_depth: int = DEFAULT_NAMESPACE_DEPTH  # leading segments of a node's namespace: its robot
     origins: tuple[Origin, ...] = ()  # where the ROS settings came from (flag, file, ROS_* variable)
 
 
@@ -114,13 +116,15 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
     if ros2_config.enabled and "enabled" not in dds_section:
         # The ROS 2 node hears the robots the DDS source would: one of them follows them, unless told.
         dds_section = {**dds_section, "enabled": False}
+    fleet_section = section(raw, "fleet", fleet.KEYS)
     config = Config(
         web=web.web_config(section(raw, "web", web.KEYS)),
         dds=dds.dds_config(dds_section),
         ros1=ros1.ros1_config(section(raw, "ros1", ros1.KEYS)),
         zenoh=zenoh.zenoh_config(section(raw, "zenoh", zenoh.KEYS)),
         ros2=ros2_config,
-        fleet=fleet.fleet_limits(section(raw, "fleet", fleet.KEYS)),
+        fleet=fleet.fleet_limits(fleet_section),
+        robot_namespace_depth=fleet.robot_namespace_depth(fleet_section),
         metrics=metrics.metrics_config(section(raw, "metrics", metrics.KEYS)),
         ingest=ingest.ingest_config(section(raw, "ingest", ingest.KEYS)),
         events=events.events_config(section(raw, "events", events.KEYS)),

@@ -8,6 +8,7 @@ from typing import Any
 
 from overseer.levels import Level, severity_rank, worst
 from overseer.model import Component, FleetSnapshot, RobotState
+from overseer.model.state import robot_period
 
 _COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 
@@ -15,7 +16,7 @@ _COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 def robots_document(snapshot: FleetSnapshot) -> dict[str, Any]:
     """GET /api/v1/robots: every robot's summary."""
     return {
-        "generated_at": snapshot.taken_at,
+        "generated_at": snapshot.generated_at,
         "robots": [
             _robot_summary(snapshot, robot) for robot in sorted(snapshot.robots, key=lambda r: r.name)
         ],
@@ -38,13 +39,14 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
                 "stale": level is Level.STALE,
                 "message": component.message,
                 "values": [{"key": key, "value": value} for key, value in component.values],
-                "last_update": snapshot.last_update(robot, key, component),
+                "last_update": robot.wall_time(snapshot.last_update(robot, key, component)),
+                "stale_after": snapshot.stale_after(robot, component),
                 "level_changes": component.level_changes,
             }
         )
     document = _robot_summary(snapshot, robot)
     document["components"] = components
-    return {"generated_at": snapshot.taken_at, **document}
+    return {"generated_at": snapshot.generated_at, **document}
 
 
 def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]:
@@ -59,7 +61,9 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
         "state": level.name,
         "up": up,
         "publisher_alive": robot.publisher_alive,
-        "last_message": robot.last_message,
+        "last_message": robot.last_message_wall,
+        "period": robot_period(snapshot.limits, robot) if any(feed.period for feed in robot.feeds) else None,
+        "timeout": snapshot.robot_timeout(robot),
         "transport": robot.transport,
         "components": len(robot.components),
         "counts": counts,
@@ -115,7 +119,7 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
     robots = {robot.name: robot for robot in snapshot.robots}
     chosen = heapq.nsmallest(query.limit, matches, key=lambda match: match[:4])
     return {
-        "generated_at": snapshot.taken_at,
+        "generated_at": snapshot.generated_at,
         "total": len(matches),
         "limit": query.limit,
         "truncated": len(matches) > len(chosen),
@@ -127,7 +131,9 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
                 "level": int(level),
                 "state": level.name,
                 "message": component.message,
-                "last_update": snapshot.last_update(robots[robot_name], component.key, component),
+                "last_update": robots[robot_name].wall_time(
+                    snapshot.last_update(robots[robot_name], component.key, component)
+                ),
             }
             for _, robot_name, _, _, component, level in chosen
         ],

@@ -10,7 +10,6 @@ prometheus-client's rendering of the same fleet.
 
 from __future__ import annotations
 
-import bisect
 import re
 import threading
 from array import array
@@ -24,6 +23,7 @@ from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels,
 from overseer.fleet.metric_values import NumericValues
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
+from overseer.model.snapshot import RobotTiming
 
 # prometheus-client's number format (Go's), so values render exactly as its families' do.
 go_float = cast(Callable[[float], str], floatToGoString)
@@ -40,14 +40,13 @@ class _RobotLines:
 
     `levels`, `changes`, `values` and `messages` hold every component's lines of each family;
     component i's lines of family k start at `offsets[FAMILIES * i + k]`. `components` are the records
-    they were rendered from (None for those missing from the latest message): a component whose record
-    is the same object again renders the same lines (when the robot's up and freshness did not change),
-    so they are copied instead.
+    they were rendered from (None for those missing from their feed's latest message): a component whose
+    record is the same object again renders the same lines (when the robot's up, timing and staleness did
+    not change), so they are copied instead.
     """
 
-    signature: tuple[int, bool, bool, int]
-    revision: int
-    other_updates: list[float]  # sorted last updates of components missing from the latest message
+    signature: tuple[int, bool, tuple[int, ...]]
+    timing: RobotTiming  # when its components turn STALE, for this revision
     robot_level: Level
     levels: bytes
     changes: bytes
@@ -106,7 +105,7 @@ class FleetExposition:
             if robot.last_message is not None:
                 last_message.append(
                     f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
-                    f"{go_float(robot.last_message)}\n"
+                    f"{go_float(robot.last_message + robot.wall_offset)}\n"
                 )
         self._robots = current
         return ExpositionPart(
@@ -142,14 +141,10 @@ class ExpositionPart:
 def _lines_for(
     snapshot: FleetSnapshot, robot: RobotState, up: bool, cached: _RobotLines | None, render: _RenderCache
 ) -> _RobotLines:
-    if cached is not None and cached.revision == robot.revision:
-        other_updates = cached.other_updates
-    else:
-        components = robot.components
-        other_updates = sorted(components[key].last_update for key in robot.missing)
-    message_stale = not snapshot.fresh(robot.last_message)
-    # How many components missing from the latest message are stale now: a change renders them again.
-    signature = (robot.revision, up, message_stale, bisect.bisect_left(other_updates, snapshot.stale_before))
+    same_revision = cached is not None and cached.signature[0] == robot.revision
+    timing = cached.timing if cached is not None and same_revision else snapshot.timing(robot)
+    # How far its components have gone STALE: while that holds, so do their levels.
+    signature = (robot.revision, up, snapshot.staleness(robot, timing))
     if cached is not None and cached.signature == signature:
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
@@ -157,7 +152,11 @@ def _lines_for(
     escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
     with_changes = render.level_changes
     robot_label = f'robot="{escape(robot.name)}"'
-    reusable = cached.components if cached is not None and cached.signature[1:3] == signature[1:3] else ()
+    reusable = (
+        cached.components
+        if cached is not None and cached.signature[1:] == signature[1:] and cached.timing == timing
+        else ()
+    )
     lines = _LinesBuilder(cached)
     missing = robot.missing
     levels = snapshot.component_levels(robot, up)
@@ -192,7 +191,7 @@ def _lines_for(
             b"" if message is None else _status_message_line(identity, level, message, robot_label),
         )
     level_lines, changes, values_lines, message_lines, offsets = lines.finish(len(levels))
-    # A component missing from the latest message renders by its own time: never copied (None).
+    # A component missing from its feed's latest message renders by its own time: never copied (None).
     records = (
         tuple(component if key not in missing else None for key, component in items)
         if missing
@@ -200,8 +199,7 @@ def _lines_for(
     )
     return _RobotLines(
         signature,
-        robot.revision,
-        other_updates,
+        timing,
         worst(levels) if up else Level.STALE,
         level_lines,
         changes,

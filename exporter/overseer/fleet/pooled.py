@@ -67,10 +67,12 @@ class PooledFleet:
         Icinga 2 push that they are gone, and it would delete their hosts.
         """
         last = self._last_snapshot
-        if last is not None and time.time() - last.taken_at < SNAPSHOT_REUSE_SECONDS:
+        if last is not None and time.monotonic() - last.taken_at < SNAPSHOT_REUSE_SECONDS:
             return last
         answers = self.pool.ask_every("snapshot")
-        self._last_snapshot = merge_snapshots([a.value for a in answers], self.pool.config.fleet, time.time())
+        self._last_snapshot = merge_snapshots(
+            [a.value for a in answers], self.pool.config.fleet, time.monotonic(), time.time()
+        )
         return self._last_snapshot
 
     def exposition_parts(self) -> list[ExpositionPart]:

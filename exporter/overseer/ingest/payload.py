@@ -17,7 +17,7 @@ from overseer.model import FleetModel
 class _Layout(NamedTuple):
     """Where the statuses of the last payload applied lay, and a hash of each."""
 
-    revision: int  # the robot's revision that payload made
+    revision: int  # the feed's revision that payload made
     fingerprint: bytes  # 128-bit BLAKE2 digest of the payload but its stamp
     prefix: bytes  # the bytes before the stamp (the encapsulation header)
     head_hash: int  # hash of the bytes between the stamp and the first status
@@ -27,7 +27,7 @@ class _Layout(NamedTuple):
 
 
 class PayloadIngest:
-    """Feeds one robot's diagnostics topic into the model.
+    """Feeds one feed of a robot (a diagnostics topic, or one publisher of it) into the model.
 
     Aggregators republish the same array every second: a payload equal to the last one applied but for
     its stamp only refreshes the robot. Most other arrays differ from the last one in a few statuses (a
@@ -39,12 +39,21 @@ class PayloadIngest:
     (`scan.scan_compiled`, the same hashes); `scan.scan_python` is the pure-Python reference.
     """
 
-    def __init__(self, model: FleetModel, robot: str, transport: str, topic: str, wire: WireFormat) -> None:
-        """Ingest `topic` of `robot`, whose payloads are serialized as `wire` says."""
+    def __init__(
+        self,
+        model: FleetModel,
+        robot: str,
+        transport: str,
+        topic: str,
+        wire: WireFormat,
+        feed: str | None = None,
+    ) -> None:
+        """Ingest `topic` of `robot` (as feed `feed`, default the topic), serialized as `wire` says."""
         self._model = model
         self._robot = robot
         self._transport = transport
         self._topic = topic
+        self._feed = topic if feed is None else feed
         self._wire = wire
         self._layout: _Layout | None = None
         self._lock = threading.Lock()  # DDS may call a reader's listener from more than one thread
@@ -60,7 +69,7 @@ class PayloadIngest:
             try:
                 if layout is not None:
                     if fingerprint == layout.fingerprint and self._model.touch(
-                        self._robot, self._transport, layout.revision
+                        self._robot, self._transport, self._feed, layout.revision
                     ):
                         self._layout = layout
                         return
@@ -74,7 +83,9 @@ class PayloadIngest:
     def _apply_whole(self, payload: bytes, fingerprint: bytes) -> _Layout | None:
         wire = self._wire
         laid_out = decode_laid_out(wire, payload)
-        applied = self._model.apply_array(self._robot, laid_out.decoded, self._transport, self._topic)
+        applied = self._model.apply_array(
+            self._robot, laid_out.decoded, self._transport, self._topic, self._feed
+        )
         if applied.revision is None:
             return None
         bounds = laid_out.bounds
@@ -122,9 +133,9 @@ class PayloadIngest:
         model = self._model
         if changed:
             revision = model.apply_changes(
-                self._robot, layout.revision, changed, self._transport, self._topic, fits_limits=fits
+                self._robot, layout.revision, changed, self._transport, self._feed, fits_limits=fits
             )
-        elif model.touch(self._robot, self._transport, layout.revision):
+        elif model.touch(self._robot, self._transport, self._feed, layout.revision):
             revision = layout.revision  # only bytes no status holds changed (CDR padding)
         else:
             revision = None

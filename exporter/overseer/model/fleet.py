@@ -3,6 +3,11 @@
 Writers (the transports) call `apply` with decoded arrays; readers (the views) take a `FleetSnapshot`.
 Robot states are replaced whole on every message, so a snapshot is a shallow copy taken under the one
 lock, and views read it with no lock held.
+
+A robot is heard on feeds: a topic, or one publisher of a topic where the transport tells publishers
+apart. Each feed's arrays may hold only some of the robot's components (several diagnostic_updater nodes
+share one robot's `/diagnostics`, and a node's start-up array holds one status); a component is whatever
+its robot reports under one name (`state.ComponentKey`), whichever feed reported it last.
 """
 
 from __future__ import annotations
@@ -19,16 +24,25 @@ from typing import NamedTuple
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model.snapshot import FleetSnapshot
-from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
+from overseer.model.state import (
+    PERIOD_SAMPLES,
+    Component,
+    ComponentKey,
+    Feed,
+    FleetLimits,
+    RobotState,
+    feed_stale_after,
+    up_since,
+)
 
 _LEVELS = tuple(Level)  # by wire value, faster than calling the enum
 
 
 class Applied(NamedTuple):
-    """What applying one array did: whether nothing was dropped, and the robot's revision after it."""
+    """What applying one array did: whether nothing was dropped, and the feed's revision after it."""
 
     complete: bool
-    revision: int | None  # None when the robot was refused (the robot cap)
+    revision: int | None  # None when the array was refused (the robot cap, the feed cap)
 
 
 class LevelChange(NamedTuple):
@@ -38,17 +52,27 @@ class LevelChange(NamedTuple):
     current: Component
 
 
-# Called after the lock is released with the robot, the message's time and what changed in it.
+# Called after the lock is released with the robot, the message's wall-clock time and what changed in it.
 LevelListener = Callable[[str, float, list[LevelChange]], None]
 
 
 class FleetModel:
     """The fleet's live state behind one lock; safe to feed from many transport threads."""
 
-    def __init__(self, limits: FleetLimits | None = None, clock: Callable[[], float] = time.time) -> None:
-        """Create an empty fleet bounded by `limits`; `clock` gives unix time (injectable for tests)."""
+    def __init__(
+        self,
+        limits: FleetLimits | None = None,
+        clock: Callable[[], float] | None = None,
+        wall_clock: Callable[[], float] | None = None,
+    ) -> None:
+        """Create an empty fleet bounded by `limits`.
+
+        `clock` (default: monotonic) judges ages and `wall_clock` (default: the system's, or `clock` when
+        only that is given, as tests do) dates what is reported.
+        """
         self.limits = limits or FleetLimits()
-        self._clock = clock
+        self._clock = time.monotonic if clock is None else clock
+        self._wall_clock = wall_clock or (time.time if clock is None else clock)
         self._lock = threading.Lock()
         self._robots: dict[str, RobotState] = {}
         self._message_counts: Counter[tuple[str, str]] = Counter()
@@ -56,6 +80,7 @@ class FleetModel:
         self._truncated_strings = 0
         self._source_errors: Counter[tuple[str, str]] = Counter()
         self._level_listener: LevelListener | None = None
+        self._clashed: dict[str, set[str]] = {}  # robot → names it reports kept apart by hardware_id
 
     def set_level_listener(self, listener: LevelListener | None) -> None:
         """Have `listener` told of every reported level change and every new component, as applied."""
@@ -73,50 +98,67 @@ class FleetModel:
 
     def register(self, robot: str, transport: str) -> bool:
         """Make a discovered robot known before its first message; False when the robot cap is reached."""
+        now, wall = self._clock(), self._wall_clock()
         with self._lock:
             if robot in self._robots:
                 return True
             if len(self._robots) >= self.limits.max_robots:
                 self._dropped_statuses["robot_limit"] += 1
                 return False
-            self._robots[robot] = RobotState(robot, transport, None, MappingProxyType({}), self._clock())
+            self._robots[robot] = RobotState(
+                robot, transport, None, MappingProxyType({}), now, wall_offset=wall - now
+            )
             return True
 
-    def touch(self, robot: str, transport: str, revision: int | None = None) -> bool:
-        """Record a message identical to the robot's last one; False when it must be applied in full.
+    def touch(self, robot: str, transport: str, feed: str = "", revision: int | None = None) -> bool:
+        """Record a message identical to the feed's last one; False when it must be applied in full.
 
-        With `revision`, the robot must still be as that revision left it: anything else that changed
-        it since (a forgotten topic, expired components) asks for a full apply too. So does a message
-        that lost something, so that its losses are counted again each time it is received.
+        With `revision`, the feed must still be as that revision left it: anything else that changed it
+        since (another feed taking a component over, expired components) asks for a full apply too. So
+        does a message that lost something, so that its losses are counted again each time it is received.
         """
-        now = self._clock()
+        now, wall = self._clock(), self._wall_clock()
         with self._lock:
             state = self._robots.get(robot)
-            if state is None or state.last_message is None or None in state.latest:
+            if state is None:
                 return False
-            if revision is not None and state.revision != revision:
+            feeds = state.feeds
+            index = _feed_index(feeds, feed)
+            if index is None:
                 return False
+            old = feeds[index]
+            if None in old.latest or (revision is not None and old.revision != revision):
+                return False
+            current = _learned(old, now, True)._replace(last_message=now)
+            bound_changed = feed_stale_after(self.limits, current) != feed_stale_after(self.limits, old)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
                 now,
                 state.components,
                 state.discovered_at,
-                state.revision,
-                state.latest,
+                state.revision + bound_changed,
+                (*feeds[:index], current, *feeds[index + 1 :]),
                 state.missing,
-                state.publisher_alive,
+                state.left_at,
+                wall - now,
+                up_since(self.limits, state, now),
             )
             self._message_counts[(transport, "received")] += 1
         return True
 
-    def apply(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> bool:
+    def apply(
+        self, robot: str, array: DiagnosticArray, transport: str, topic: str = "", feed: str | None = None
+    ) -> bool:
         """Merge one received array into the robot's state; False when anything in it was dropped."""
-        return self.apply_array(robot, array, transport, topic).complete
+        return self.apply_array(robot, array, transport, topic, feed).complete
 
-    def apply_array(self, robot: str, array: DiagnosticArray, transport: str, topic: str = "") -> Applied:
-        """Merge one received array into the robot's state, and tell the revision it made."""
-        now = self._clock()
+    def apply_array(
+        self, robot: str, array: DiagnosticArray, transport: str, topic: str = "", feed: str | None = None
+    ) -> Applied:
+        """Merge one array received on `feed` (default: the topic) and tell the feed's revision it made."""
+        now, wall = self._clock(), self._wall_clock()
+        feed_name = topic if feed is None else feed
         limits = self.limits
         prepared, dropped, truncated = _prepare(array.statuses, limits)
         listener = self._level_listener
@@ -128,63 +170,43 @@ class FleetModel:
                     self._message_counts[(transport, "dropped")] += 1
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
                     return Applied(False, None)
-                components: dict[ComponentKey, Component] = {}
-                revision, discovered_at, alive = 0, now, True
+                state = RobotState(robot, transport, None, MappingProxyType({}), now)
+            feeds = list(state.feeds)
+            position = _feed_index(state.feeds, feed_name)
+            if position is None and len(feeds) >= limits.max_feeds_per_robot:
+                self._message_counts[(transport, "dropped")] += 1
+                self._dropped_statuses["feed_limit"] += len(array.statuses)
+                return Applied(False, None)
+            merge = _Merge(state, feed_name, now, limits, changes, self._clashed.setdefault(robot, set()))
+            latest = merge.statuses(prepared, dropped)
+            if position is None:
+                new_feed = Feed(feed_name, topic, now, latest)
+                feeds.append(new_feed)
             else:
-                components = dict(state.components)
-                revision, discovered_at, alive = state.revision, state.discovered_at, state.publisher_alive
-            latest: list[ComponentKey | None] = []
-            in_message: set[ComponentKey] = set()
-            for entry in prepared:
-                if entry is None:
-                    latest.append(None)
-                    continue
-                key, level, message, values, intact = entry
-                previous = components.get(key)
-                if previous is None:
-                    if len(components) >= limits.max_components_per_robot:
-                        dropped["component_limit"] += 1
-                        latest.append(None)
-                        continue
-                    previous = _component(_interned(key), level, message, values, now, 0, topic)
-                    components[previous.key] = previous
-                    if changes is not None:
-                        changes.append(LevelChange(None, previous))
-                else:
-                    merged = components[key] = _merged(previous, level, message, values, now, topic)
-                    if changes is not None and merged.level is not previous.level:
-                        changes.append(LevelChange(previous, merged))
-                key = previous.key  # the fleet's shared copy, not this message's
-                latest.append(key if intact and key not in in_message else None)
-                in_message.add(key)
-            if state is not None and state.last_message is not None:
-                # Components missing from this message keep the time of the last message that had them.
-                for key in state.components.keys() - state.missing - in_message:
-                    left = components.get(key)
-                    if left is not None:
-                        components[key] = left._replace(last_update=state.last_message)
-            missing = (
-                _NONE_MISSING
-                if len(in_message) == len(components)
-                else frozenset(components.keys() - in_message)
-            )
+                old_feed = feeds[position]
+                merge.left_out(old_feed)
+                learned = _learned(old_feed, now, old_feed.latest == latest)
+                new_feed = learned._replace(last_message=now, latest=latest, revision=old_feed.revision + 1)
+                feeds[position] = new_feed
             self._robots[robot] = RobotState(
                 robot,
                 transport,
                 now,
-                MappingProxyType(components),
-                discovered_at,
-                revision + 1,
-                tuple(latest),
-                missing,
-                alive,
+                MappingProxyType(merge.components),
+                state.discovered_at,
+                state.revision + 1,
+                merge.other_feeds(feeds),
+                merge.missing_set(),
+                state.left_at,
+                wall - now,
+                up_since(limits, state, now),
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
             self._message_counts[(transport, "dropped" if dropped else "received")] += 1
         if changes and listener is not None:
-            listener(robot, now, changes)
-        return Applied(not dropped, revision + 1)
+            listener(robot, wall, changes)
+        return Applied(not dropped, new_feed.revision)
 
     def apply_changes(
         self,
@@ -192,26 +214,31 @@ class FleetModel:
         revision: int,
         changed: list[tuple[int, DiagnosticStatus]],
         transport: str,
-        topic: str = "",
+        feed: str = "",
         *,
         fits_limits: bool = False,
     ) -> int | None:
-        """Apply an array equal to the robot's latest but for the statuses `changed` (by position).
+        """Apply an array equal to the feed's latest but for the statuses `changed` (by position).
 
-        Only when the robot is still at `revision`, its latest message lost nothing, and every changed
-        status kept its component; returns the new revision, or None (nothing done: apply it in full).
-        `fits_limits`: the caller has checked that no status has a level outside 0-3, a text longer
+        Only when the feed is still at `revision`, its latest message lost nothing, and every changed
+        status kept its component; returns the feed's new revision, or None (nothing done: apply it in
+        full). `fits_limits`: the caller has checked that no status has a level outside 0-3, a text longer
         than `max_string_length` or more than `max_values_per_component` key-values.
         """
-        now = self._clock()
+        now, wall = self._clock(), self._wall_clock()
         if not fits_limits and not _intact(changed, self.limits):
             return None
         with self._lock:
             state = self._robots.get(robot)
-            if state is None or state.revision != revision or state.last_message is None:
+            if state is None:
                 return None
-            latest = state.latest
-            if None in latest:
+            feeds = state.feeds
+            index = _feed_index(feeds, feed)
+            if index is None:
+                return None
+            old = feeds[index]
+            latest = old.latest
+            if old.revision != revision or None in latest:
                 return None
             in_latest = len(latest)
             components = dict(state.components)
@@ -219,56 +246,62 @@ class FleetModel:
             changes: list[LevelChange] = []
             intern = sys.intern
             # Written for speed (arrays that changed in every status come through here): the checks and
-            # the merge of `_prepare` and `_merged`, on statuses `_intact` found within every limit.
-            for index, (wire_level, name, message, hardware_id, values) in changed:
-                if index >= in_latest:
+            # the merge of `_prepare` and `_Merge.status`, on statuses `_intact` found within every limit.
+            for position, (wire_level, name, message, hardware_id, values) in changed:
+                if position >= in_latest:
                     return None
-                key = latest[index]
-                if key is None or key[0] != name or key[1] != hardware_id:
+                key = latest[position]
+                if key is None or key[0] != name or (key[1] and key[1] != hardware_id):
                     return None
                 previous = components[key]
                 level = _LEVELS[wire_level]
                 same_values = previous.values == values
+                hardware_id = hardware_id or previous.hardware_id
                 if (
                     previous.level is level
                     and previous.message == message
                     and same_values
-                    and previous.topic == topic
+                    and previous.hardware_id == hardware_id
                 ):
                     continue  # the status says nothing new
                 current = components[key] = Component(
                     previous.key,
                     level,
                     intern(message),
+                    intern(hardware_id),
                     previous.values if same_values else tuple([(intern(k), v) for k, v in values]),
                     now,
                     previous.level_changes + (previous.level is not level),
-                    topic,
+                    feed,
                 )
                 if listener is not None and current.level is not previous.level:
                     changes.append(LevelChange(previous, current))
+            current_feed = _learned(old, now, True)._replace(last_message=now, revision=revision + 1)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
                 now,
                 MappingProxyType(components),
                 state.discovered_at,
-                revision + 1,
-                latest,
+                state.revision + 1,
+                (*feeds[:index], current_feed, *feeds[index + 1 :]),
                 state.missing,
-                state.publisher_alive,
+                state.left_at,
+                wall - now,
+                up_since(self.limits, state, now),
             )
             self._message_counts[(transport, "received")] += 1
         if changes and listener is not None:
-            listener(robot, now, changes)
+            listener(robot, wall, changes)
         return revision + 1
 
-    def set_publisher_alive(self, robot: str, alive: bool) -> None:
-        """Record that the robot's diagnostics publisher is alive or gone (no-op for an unknown robot)."""
+    def publisher_left(self, robot: str) -> None:
+        """Record that the robot's last diagnostics publisher left: it is down until it speaks again."""
+        now = self._clock()
         with self._lock:
             state = self._robots.get(robot)
-            if state is not None and state.publisher_alive is not alive:
-                self._robots[robot] = replace(state, publisher_alive=alive)
+            if state is not None and state.publisher_alive:
+                self._robots[robot] = replace(state, left_at=now, revision=state.revision + 1)
 
     def forget_topic(self, robot: str, topic: str) -> None:
         """Drop the components a robot reported on `topic` (when it turns out to publish a better one)."""
@@ -276,8 +309,9 @@ class FleetModel:
             state = self._robots.get(robot)
             if state is None:
                 return
-            kept = {k: c for k, c in state.components.items() if c.topic != topic}
-            if len(kept) != len(state.components):
+            gone = {feed.name for feed in state.feeds if feed.topic == topic}
+            if gone:
+                kept = {k: c for k, c in state.components.items() if c.feed not in gone}
                 self._robots[robot] = _replace_components(state, kept)
 
     def expire(self) -> list[str]:
@@ -285,13 +319,14 @@ class FleetModel:
         now = self._clock()
         horizon = now - self.limits.expire_after
         forgotten = []
+        last_update = FleetSnapshot.last_update
         with self._lock:
             for name, state in list(self._robots.items()):
                 if state.last_seen < horizon:
                     del self._robots[name]
+                    self._clashed.pop(name, None)
                     forgotten.append(name)
                     continue
-                last_update = FleetSnapshot.last_update
                 if any(last_update(state, k, c) < horizon for k, c in state.components.items()):
                     kept = {k: c for k, c in state.components.items() if last_update(state, k, c) >= horizon}
                     self._robots[name] = _replace_components(state, kept)
@@ -305,13 +340,163 @@ class FleetModel:
             dropped = dict(self._dropped_statuses)
             truncated = self._truncated_strings
             errors = dict(self._source_errors)
-        return FleetSnapshot(self._clock(), self.limits, robots, counts, dropped, truncated, errors)
+        return FleetSnapshot(
+            self._clock(), self.limits, robots, counts, dropped, truncated, errors, self._wall_clock()
+        )
+
+
+class _Merge:
+    """One full array of one feed merged into a robot's components (under the model's lock)."""
+
+    def __init__(
+        self,
+        state: RobotState,
+        feed: str,
+        now: float,
+        limits: FleetLimits,
+        changes: list[LevelChange] | None,
+        clashed: set[str],
+    ) -> None:
+        self.components = dict(state.components)
+        self._feed = feed
+        self._now = now
+        self._limits = limits
+        self._changes = changes
+        self._clashed = clashed  # the robot's names kept apart by hardware_id (the model's own set)
+        self._missing = set(state.missing)
+        self._in_message: set[ComponentKey] = set()
+        self._taken_over: dict[str, set[ComponentKey]] = {}  # other feeds → the components taken from them
+
+    def statuses(
+        self, prepared: list[_Prepared | None], dropped: Counter[str]
+    ) -> tuple[ComponentKey | None, ...]:
+        """Merge every status of the array; the components they went to, in order (the feed's latest)."""
+        components, limits, in_message = self.components, self._limits, self._in_message
+        first_ids = _clashes(prepared)
+        for name in first_ids:
+            if name not in self._clashed:  # kept apart from now on: the component under the name alone goes
+                self._clashed.add(name)
+                components.pop((name, ""), None)
+        latest: list[ComponentKey | None] = []
+        for entry in prepared:
+            if entry is None:
+                latest.append(None)
+                continue
+            (name, hardware_id), level, message, values, intact = entry
+            key = (name, "") if name not in self._clashed else self._kept_apart(name, hardware_id, first_ids)
+            previous = components.get(key)
+            if previous is None:
+                if len(components) >= limits.max_components_per_robot:
+                    dropped["component_limit"] += 1
+                    latest.append(None)
+                    continue
+                key = (sys.intern(name), sys.intern(key[1]))
+                current = _component(key, level, message, hardware_id, values, self._now, 0, self._feed)
+                if self._changes is not None:
+                    self._changes.append(LevelChange(None, current))
+            else:
+                current = _merged(previous, level, message, hardware_id, values, self._now, self._feed)
+                if self._changes is not None and current.level is not previous.level:
+                    self._changes.append(LevelChange(previous, current))
+                if previous.feed != self._feed:
+                    self._taken_over.setdefault(previous.feed, set()).add(previous.key)
+            components[current.key] = current
+            key = current.key  # the fleet's shared copy, not this message's
+            latest.append(key if intact and key not in in_message else None)
+            in_message.add(key)
+        self._missing.difference_update(in_message)
+        return tuple(latest)
+
+    def _kept_apart(self, name: str, hardware_id: str, first_ids: dict[str, str]) -> ComponentKey:
+        """The component of a name kept apart by hardware_id; a status without one goes to the first."""
+        if hardware_id:
+            return (name, hardware_id)
+        if name in first_ids:
+            return (name, first_ids[name])
+        for known in self.components:
+            if known[0] == name:
+                return known
+        return (name, "")
+
+    def left_out(self, old_feed: Feed) -> None:
+        """What the feed's last message carried and this one does not keeps that message's time."""
+        for key in old_feed.latest:
+            if key is None or key in self._in_message or key in self._missing:
+                continue
+            component = self.components.get(key)
+            if component is not None and component.feed == self._feed:
+                self.components[key] = component._replace(last_update=old_feed.last_message)
+                self._missing.add(key)
+
+    def other_feeds(self, feeds: list[Feed]) -> tuple[Feed, ...]:
+        """The feeds after this array, those that lost a component to it or carry nothing settled.
+
+        One that lost a component reads its next message in full (its latest no longer says what it
+        carries), and one left carrying nothing goes.
+        """
+        if not self._taken_over:
+            return tuple(feeds)
+        carried = {component.feed for component in self.components.values()} | {self._feed}
+        settled = []
+        for feed in feeds:
+            if feed.name not in carried:
+                continue
+            taken = self._taken_over.get(feed.name)
+            if taken:
+                latest = tuple(None if key in taken else key for key in feed.latest)
+                feed = feed._replace(latest=latest, revision=feed.revision + 1)
+            settled.append(feed)
+        return tuple(settled)
+
+    def missing_set(self) -> frozenset[ComponentKey]:
+        """The components not in their feed's latest message (the model's shared empty set for none)."""
+        missing = self._missing
+        missing.intersection_update(self.components)
+        return frozenset(missing) if missing else _NONE_MISSING
 
 
 _NONE_MISSING: frozenset[ComponentKey] = frozenset()
 
-# A status ready to merge: its component, level, message, values, and whether it arrived whole.
-_Prepared = tuple[ComponentKey, Level, str, tuple[tuple[str, str], ...], bool]
+# A status ready to merge: its name and hardware_id, level, message, values, and whether it arrived whole.
+_Prepared = tuple[tuple[str, str], Level, str, tuple[tuple[str, str], ...], bool]
+
+
+def _clashes(prepared: list[_Prepared | None]) -> dict[str, str]:
+    """The names an array holds more than once with different non-empty hardware_ids, with the first.
+
+    Those names are kept apart by hardware_id from now on.
+    """
+    names = [entry[0][0] for entry in prepared if entry is not None]
+    if len(set(names)) == len(names):
+        return {}  # almost always: every name once
+    hardware_ids: dict[str, list[str]] = {}
+    for entry in prepared:
+        if entry is not None and entry[0][1] and entry[0][1] not in hardware_ids.setdefault(entry[0][0], []):
+            hardware_ids[entry[0][0]].append(entry[0][1])
+    return {name: ids[0] for name, ids in hardware_ids.items() if len(ids) > 1}
+
+
+def _feed_index(feeds: tuple[Feed, ...], name: str) -> int | None:
+    """Where the feed called `name` is among `feeds`, or None."""
+    for index, feed in enumerate(feeds):
+        if feed.name == name:
+            return index
+    return None
+
+
+def _learned(feed: Feed, now: float, same_components: bool) -> Feed:
+    """`feed` with the interval to a message at `now` learned, when the message carried what the last did.
+
+    An interval under a quarter of the period known is a burst (a forced update), not a period; the
+    period is the upper median of the last `PERIOD_SAMPLES` intervals, so one late message does not move it.
+    """
+    if not same_components:
+        return feed
+    interval = now - feed.last_message
+    if interval <= 0.0 or interval < feed.period / 4:
+        return feed
+    intervals = (*feed.intervals[-(PERIOD_SAMPLES - 1) :], interval)
+    return feed._replace(intervals=intervals, period=sorted(intervals)[len(intervals) // 2])
 
 
 def _prepare(
@@ -372,15 +557,23 @@ def _component(
     key: ComponentKey,
     level: Level,
     message: str,
+    hardware_id: str,
     values: tuple[tuple[str, str], ...],
     now: float,
     changes: int,
-    topic: str,
+    feed: str,
 ) -> Component:
     # Robots of one fleet repeat the same messages and keys: interning stores each text once.
     intern = sys.intern
     return Component(
-        key, level, intern(message), tuple([(intern(k), v) for k, v in values]), now, changes, topic
+        key,
+        level,
+        intern(message),
+        intern(hardware_id),
+        tuple([(intern(k), v) for k, v in values]),
+        now,
+        changes,
+        feed,
     )
 
 
@@ -388,35 +581,43 @@ def _merged(
     previous: Component,
     level: Level,
     message: str,
+    hardware_id: str,
     values: tuple[tuple[str, str], ...],
     now: float,
-    topic: str,
+    feed: str,
 ) -> Component:
-    """The component's record after a status: `previous` itself when the status says nothing new."""
+    """The component's record after a status: `previous` itself when the status says nothing new.
+
+    An empty hardware_id (diagnostic_updater's start-up status) keeps the one the component has.
+    """
+    hardware_id = hardware_id or previous.hardware_id
     if (
         previous.level is level
         and previous.message == message
         and previous.values == values
-        and previous.topic == topic
+        and previous.hardware_id == hardware_id
+        and previous.feed == feed
     ):
         return previous
     changes = previous.level_changes + (previous.level is not level)
-    return _component(previous.key, level, message, values, now, changes, topic)
-
-
-def _interned(key: ComponentKey) -> ComponentKey:
-    return sys.intern(key[0]), sys.intern(key[1])
+    return _component(previous.key, level, message, hardware_id, values, now, changes, feed)
 
 
 def _replace_components(state: RobotState, components: dict[ComponentKey, Component]) -> RobotState:
-    return RobotState(
-        state.name,
-        state.transport,
-        state.last_message,
-        MappingProxyType(components),
-        state.discovered_at,
-        state.revision + 1,
-        tuple(key if key in components else None for key in state.latest),
-        state.missing.intersection(components),
-        state.publisher_alive,
+    """`state` with only `components`: feeds forget the others, and feeds that carry none go."""
+    carried = {component.feed for component in components.values()}
+    feeds = tuple(
+        feed._replace(
+            latest=tuple(key if key in components else None for key in feed.latest),
+            revision=feed.revision + 1,
+        )
+        for feed in state.feeds
+        if feed.name in carried
+    )
+    return replace(
+        state,
+        components=MappingProxyType(components),
+        revision=state.revision + 1,
+        feeds=feeds,
+        missing=state.missing.intersection(components),
     )

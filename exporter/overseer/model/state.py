@@ -1,18 +1,35 @@
-"""What the model holds: a robot's state, its components' last statuses, and the limits that bound them.
+"""What the model holds: a robot's state, the feeds it is heard on, its components' last statuses, the limits.
 
 Robot states are immutable and replaced whole on every message, so a snapshot of the fleet is a shallow
-copy of them.
+copy of them. Times the model judges by (last message, last update, discovery, departure) are monotonic
+seconds: a step of the wall clock changes no level. Each robot keeps the offset between the wall clock and
+the monotonic one at its last message, so the times reported to users are wall-clock times.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
 
 from overseer.levels import Level
 
-ComponentKey = tuple[str, str]  # (name, hardware_id)
+# (name, discriminator): the discriminator is '' for every component but the statuses of one name that a
+# robot reports side by side with different hardware_ids in one array (a genuine clash): those are kept
+# apart, each under its hardware_id.
+ComponentKey = tuple[str, str]
+
+STALE_PERIODS = 3.0  # a component is STALE after this many of its producer's periods without an update
+PERIOD_SAMPLES = 5  # intervals a feed's period is the median of
+
+
+@dataclass(frozen=True)
+class StaleOverride:
+    """Components whose whole name matches `pattern` are STALE after exactly `stale_after` seconds."""
+
+    pattern: re.Pattern[str]
+    stale_after: float
 
 
 @dataclass(frozen=True)
@@ -26,47 +43,67 @@ class FleetLimits:
     max_components_per_robot: int = 1_000
     max_values_per_component: int = 64
     max_string_length: int = 1_024
+    max_feeds_per_robot: int = 64
+    stale_periods: float = STALE_PERIODS
+    stale_overrides: tuple[StaleOverride, ...] = ()
 
 
 class Component(NamedTuple):
     """The last status a component reported; `level` is the reported level, before staleness.
 
-    `last_update` is when it was last reported in a message other than its robot's latest one; while it
-    is in the latest message, `FleetSnapshot.last_update` gives that message's time instead. This lets
-    an unchanged message refresh a whole robot by replacing one `RobotState`. A named tuple, not a frozen
-    dataclass: it is built for every status that changed, and a frozen dataclass is four times slower
-    to build. `key` is the very tuple that keys it in its robot's components (and in `latest`).
+    `last_update` (monotonic) is when it was last reported in a message other than its feed's latest one;
+    while it is in that latest message, the feed's last message time applies instead
+    (`FleetSnapshot.last_update`). This lets an unchanged message refresh all it carries by replacing one
+    `Feed`. `hardware_id` is the latest non-empty hardware_id reported (diagnostic_updater's start-up
+    status has none). A named tuple, not a frozen dataclass: it is built for every status that changed,
+    and a frozen dataclass is four times slower to build. `key` is the very tuple that keys it in its
+    robot's components (and in its feed's `latest`).
     """
 
     key: ComponentKey
     level: Level
     message: str
+    hardware_id: str
     values: tuple[tuple[str, str], ...]
     last_update: float
     level_changes: int
-    topic: str
+    feed: str  # the feed that reported it last
 
     @property
     def name(self) -> str:
         """The status's name."""
         return self.key[0]
 
-    @property
-    def hardware_id(self) -> str:
-        """The status's hardware_id."""
-        return self.key[1]
+
+class Feed(NamedTuple):
+    """One stream a robot is heard on: a topic, from one publisher where the transport tells them apart.
+
+    `latest` holds, in the message's order, the component each status of the feed's latest message went
+    to, or None where the status lost something (dropped, cut short, a repeated name) or another feed
+    took the component over: an ingest may then apply only the statuses that changed. `revision` counts
+    the changes an ingest's memory of the feed depends on. `period` is the median of the last intervals
+    between messages that carried the same components (0.0 until one is known): start-up arrays and
+    other partial ones do not count.
+    """
+
+    name: str
+    topic: str
+    last_message: float
+    latest: tuple[ComponentKey | None, ...]
+    revision: int = 0
+    period: float = 0.0
+    intervals: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
 class RobotState:
     """One robot as last seen; replaced whole, never mutated.
 
-    `latest` holds, in the message's order, the component each status of the latest message went to,
-    or None where the status lost something (dropped, cut short, or a repeated name): an ingest may
-    then apply only the statuses that changed (`FleetModel.apply_changes`). `missing` holds the
-    components absent from the latest message; it is empty for almost every robot, so it is shared.
-    `publisher_alive` is False while a transport that tracks publishers (Zenoh liveliness) knows the
-    robot's diagnostics publisher is gone: the robot is down at once, before `robot_timeout`.
+    `missing` holds the components that are not in their feed's latest message (their own `last_update`
+    applies); it is empty for almost every robot, so it is shared. `left_at` is when a transport that
+    tracks publishers (DDS discovery, Zenoh liveliness, the ROS graph) saw the robot's last diagnostics
+    publisher go: the robot is down from then until a message arrives after it. `revision` changes with
+    anything a judgement or a rendering of the robot depends on but the feeds' times.
     """
 
     name: str
@@ -75,11 +112,68 @@ class RobotState:
     components: Mapping[ComponentKey, Component]
     discovered_at: float
     revision: int = 0
-    latest: tuple[ComponentKey | None, ...] = ()
+    feeds: tuple[Feed, ...] = ()
     missing: frozenset[ComponentKey] = frozenset()
-    publisher_alive: bool = True  # False once the transport saw the robot's publisher go (liveliness)
+    left_at: float | None = None
+    wall_offset: float = 0.0  # wall clock minus monotonic clock, at the last message (or discovery)
+    up_since: float = 0.0  # the first message since it was last down (silent, or its publisher gone)
 
     @property
     def last_seen(self) -> float:
-        """When the robot last sent a message, or when it was discovered if it never did."""
+        """When the robot last sent a message, or when it was discovered if it never did (monotonic)."""
         return self.discovered_at if self.last_message is None else self.last_message
+
+    @property
+    def publisher_alive(self) -> bool:
+        """False from the departure of its last publisher until a message arrives after it."""
+        return self.left_at is None or (self.last_message is not None and self.last_message > self.left_at)
+
+    def wall_time(self, monotonic: float) -> float:
+        """A monotonic time of this robot as the wall clock read it then (unix time)."""
+        return monotonic + self.wall_offset
+
+    @property
+    def last_message_wall(self) -> float | None:
+        """The unix time of the last message, or None."""
+        return None if self.last_message is None else self.last_message + self.wall_offset
+
+    def feed(self, name: str) -> Feed | None:
+        """The feed called `name`, or None."""
+        for feed in self.feeds:
+            if feed.name == name:
+                return feed
+        return None
+
+
+def up_since(limits: FleetLimits, state: RobotState, now: float) -> float:
+    """When the run of messages a message at `now` belongs to began: now, after a silence or a departure."""
+    last = state.last_message
+    if last is None or not state.publisher_alive or now - last > robot_timeout(limits, state):
+        return now
+    return state.up_since
+
+
+def robot_period(limits: FleetLimits, robot: RobotState) -> float:
+    """The robot's own period: its fastest feed's, or `stale_after` while none is known."""
+    periods = [feed.period for feed in robot.feeds if feed.period > 0.0]
+    return min(periods) if periods else limits.stale_after
+
+
+def feed_stale_after(limits: FleetLimits, feed: Feed | None) -> float:
+    """How long the components of `feed` stay fresh: `stale_after`, or a few periods of a slower feed.
+
+    A feed's period not known yet (one message, or only partial ones) counts as `stale_after`, so a
+    producer slower than `stale_after` is not taken for stale before its second message.
+    """
+    period = feed.period if feed is not None and feed.period > 0.0 else limits.stale_after
+    return _rounded(max(limits.stale_after, limits.stale_periods * period))
+
+
+def robot_timeout(limits: FleetLimits, robot: RobotState) -> float:
+    """How long the robot may be silent before it is down: `robot_timeout`, or longer for a slow robot."""
+    return _rounded(max(limits.robot_timeout, limits.stale_periods * robot_period(limits, robot)))
+
+
+def _rounded(seconds: float) -> float:
+    """Up to a tenth of a second, so that a period's jitter does not change a judgement's bound."""
+    return -(-round(seconds * 10, 6) // 1) / 10

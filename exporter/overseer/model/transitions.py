@@ -2,15 +2,16 @@
 
 Reported level changes come from the model's level listener, called as each message is applied: every
 change is seen with its exact message and time, even one that flips back within a second, and it costs
-nothing while levels hold. STALE, robot down and up, missing and expired follow from time or from
-messages that changed nothing a listener would see, so `check` compares each snapshot with the last
-one (every second or so). Comparing is cheap: a robot that is up, as before, and reports every one of
-its components (the model's shared empty missing set) has nothing to judge.
+nothing while levels hold. What time decides (a robot down or up again, a component that stopped being
+updated or came back, one forgotten) follows from comparing each snapshot with the last one (every second
+or so). Comparing is cheap: a robot whose components are all fresh, up as before, has nothing to judge.
 
-A robot that stops publishing gives one `robot_down` event at `robot_timeout`; its components going
-STALE with it are implied, not recorded one by one. A component missing from messages its robot still
-sends gives `missing`, then `level` → STALE at `stale_after`, and `appeared` when it is reported again
-or `expired` when the model forgets it (only such components expire while their robot lives).
+A robot that stops publishing gives one `robot_down` event when it goes down; its components going STALE
+with it are implied, not recorded one by one. A component of a robot still heard gives `missing` when it
+passes its bound without an update (it went STALE while the robot spoke on), never because one array left
+it out (several nodes share a robot's `/diagnostics`, each with its own statuses), and `appeared` when it
+is new or updated again after being missing, or `expired` when the model forgets it. Every event carries
+the wall-clock time it happened at, as the robot's messages dated it.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from overseer.levels import Level, worst
 from overseer.model.events import Event, EventSink
 from overseer.model.fleet import LevelChange
-from overseer.model.snapshot import FleetSnapshot
+from overseer.model.snapshot import FleetSnapshot, RobotTiming
 from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
 
 
@@ -36,12 +37,9 @@ class _Seen:
 
     heard: bool
     up: bool
-    missing: frozenset[ComponentKey]  # the model's own set (usually its one shared empty set)
-    missing_levels: dict[ComponentKey, Level]  # the reported level of each missing component
-    stale: frozenset[ComponentKey]  # missing components already reported STALE
-
-
-_NONE: frozenset[ComponentKey] = frozenset()
+    revision: int
+    timing: RobotTiming | None
+    stale: dict[ComponentKey, tuple[Level, str]]  # STALE while their robot is up: level, hardware_id
 
 
 class TransitionDetector:
@@ -63,7 +61,7 @@ class TransitionDetector:
                     robot,
                     "appeared" if previous is None else "level",
                     current.key[0],
-                    current.key[1],
+                    current.hardware_id,
                     None if previous is None else previous.level,
                     current.level,
                     current.message,
@@ -76,15 +74,18 @@ class TransitionDetector:
         """Compare `snapshot` with the last one checked and send the transitions time brought."""
         events: list[Event] = []
         seen = self._seen
-        taken_at = snapshot.taken_at
         robot_up = snapshot.robot_up
         for robot in snapshot.robots:
             before = seen.get(robot.name)
             up = robot_up(robot)
             if before is None:
-                before = seen[robot.name] = _Seen(False, False, _NONE, {}, _NONE)
-            elif up is before.up and not robot.missing and not before.missing:
-                continue  # the common case: a robot up (or down) as before, reporting all its components
+                before = seen[robot.name] = _Seen(False, False, -1, None, {})
+            if before.revision != robot.revision or before.timing is None:
+                before.timing = snapshot.timing(robot)
+                before.revision = robot.revision
+            if up is before.up and not before.stale and not any(snapshot.staleness(robot, before.timing)):
+                before.heard = before.heard or robot.last_message is not None
+                continue  # the common case: a robot up (or down) as before, every component fresh
             self._robot_transitions(snapshot, robot, before, up, events)
         if len(seen) > len(snapshot.robots):
             present = {robot.name for robot in snapshot.robots}
@@ -93,7 +94,7 @@ class TransitionDetector:
                     continue  # discovered but never heard from: it never had an event either
                 events.append(
                     Event(
-                        taken_at,
+                        snapshot.generated_at,
                         name,
                         "expired",
                         message=f"forgotten after {self._limits.expire_after:g} s of silence",
@@ -105,27 +106,25 @@ class TransitionDetector:
     def _robot_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, up: bool, events: list[Event]
     ) -> None:
-        limits = self._limits
         name = robot.name
-        last = robot.last_message if robot.last_message is not None else snapshot.taken_at
         if before.up and not up:
-            left = not robot.publisher_alive  # the transport saw its publisher go: down now, not later
+            left = not robot.publisher_alive  # the transport saw its publisher go: down then, not later
             events.append(
                 Event(
-                    snapshot.went_down_at(robot),
+                    robot.wall_time(snapshot.went_down_at(robot)),
                     name,
                     "robot_down",
                     old_level=_reported_worst(robot.components),  # unchanged since it went silent
                     new_level=Level.STALE,
                     message="its diagnostics publisher left"
                     if left
-                    else f"no diagnostics received for {limits.robot_timeout:g} s",
+                    else f"no diagnostics received for {snapshot.robot_timeout(robot):g} s",
                 )
             )
         elif up and not before.up:
             events.append(
                 Event(
-                    last,
+                    robot.wall_time(robot.up_since),
                     name,
                     "robot_up",
                     old_level=Level.STALE if before.heard else None,
@@ -133,85 +132,68 @@ class TransitionDetector:
                     message="diagnostics received again" if before.heard else "first diagnostics received",
                 )
             )
-        if up and (robot.missing or before.missing):
-            self._missing_transitions(snapshot, robot, before, events)
+        if up:
+            self._component_transitions(snapshot, robot, before, events)
         before.heard = before.heard or robot.last_message is not None
         before.up = up
 
-    def _missing_transitions(
+    def _component_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, events: list[Event]
     ) -> None:
-        """Components leaving the robot's messages, going STALE, coming back, or forgotten while away."""
-        name, limits = robot.name, self._limits
-        at = robot.last_message if robot.last_message is not None else snapshot.taken_at
-        components, missing = robot.components, robot.missing
-        levels = before.missing_levels
-        if missing != before.missing:
-            for key in missing - before.missing:
-                component = components.get(key)
-                if component is not None:
-                    levels[key] = component.level
-                    events.append(
-                        Event(
-                            at,
-                            name,
-                            "missing",
-                            key[0],
-                            key[1],
-                            old_level=component.level,
-                            message="not in the robot's latest message",
-                        )
-                    )
-            for key in before.missing - missing:
-                component = components.get(key)
-                level = levels.pop(key, None)
-                if component is None:  # expiry forgets only components that stopped being reported
-                    events.append(
-                        Event(
-                            snapshot.taken_at,
-                            name,
-                            "expired",
-                            key[0],
-                            key[1],
-                            old_level=level,
-                            message=f"forgotten after {limits.expire_after:g} s of silence",
-                        )
-                    )
-                else:
-                    events.append(
-                        Event(
-                            at,
-                            name,
-                            "appeared",
-                            key[0],
-                            key[1],
-                            new_level=component.level,
-                            message=component.message,
-                            values=component.values,
-                        )
-                    )
-        stale = set(before.stale.intersection(missing))
-        for key in missing:
+        """Components of a robot that is up going STALE, updated again, or forgotten while STALE."""
+        name, components = robot.name, robot.components
+        stale = before.stale
+        for key, (level, hardware_id) in list(stale.items()):
             component = components.get(key)
-            if component is None or key in stale:
-                continue
-            updated = snapshot.last_update(robot, key, component)
-            if not snapshot.fresh(updated):
-                stale.add(key)
+            if component is None:  # expiry forgets only components that stopped being updated
+                del stale[key]
                 events.append(
                     Event(
-                        snapshot.went_stale_at(updated),
+                        snapshot.generated_at,
                         name,
-                        "level",
+                        "expired",
                         key[0],
-                        key[1],
-                        old_level=component.level,
-                        new_level=Level.STALE,
-                        message=f"not reported for {limits.stale_after:g} s",
+                        hardware_id,
+                        old_level=level,
+                        message=f"forgotten after {self._limits.expire_after:g} s without an update",
                     )
                 )
-        before.missing = missing
-        before.stale = frozenset(stale) if stale else _NONE
+            elif snapshot.fresh(robot, key, component):
+                del stale[key]
+                events.append(
+                    Event(
+                        robot.wall_time(snapshot.last_update(robot, key, component)),
+                        name,
+                        "appeared",
+                        key[0],
+                        component.hardware_id,
+                        new_level=component.level,
+                        message=component.message,
+                        values=component.values,
+                    )
+                )
+        if not any(snapshot.staleness(robot, before.timing or snapshot.timing(robot))):
+            return
+        last_message = robot.last_message or 0.0
+        for key, component in components.items():
+            if key in stale or snapshot.fresh(robot, key, component):
+                continue
+            went_stale_at = snapshot.went_stale_at(robot, key, component)
+            if last_message <= went_stale_at:
+                continue  # the whole robot fell silent: that is its robot_down, not each component's
+            stale[key] = (component.level, component.hardware_id)
+            events.append(
+                Event(
+                    robot.wall_time(went_stale_at),
+                    name,
+                    "missing",
+                    key[0],
+                    component.hardware_id,
+                    old_level=component.level,
+                    new_level=Level.STALE,
+                    message=f"not updated for {snapshot.stale_after(robot, component):g} s",
+                )
+            )
 
 
 def _reported_worst(components: Mapping[ComponentKey, Component]) -> Level:

@@ -104,7 +104,13 @@ def judged_robot(snapshot: FleetSnapshot, robot: RobotState, maintenance: Mainte
         for key, component in sorted(robot.components.items())
     ]
     return Robot(
-        robot.name, up, robot.last_message, snapshot.taken_at, components, robot.publisher_alive, maintenance
+        robot.name,
+        up,
+        robot.last_message_wall,
+        snapshot.generated_at,
+        components,
+        robot.publisher_alive,
+        maintenance,
     )
 
 

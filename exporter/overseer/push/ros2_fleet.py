@@ -15,7 +15,6 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray as RosDiagnosticArray
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.timer import Timer
 
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.config.ros2 import Ros2Config
@@ -71,40 +70,36 @@ class FleetDiagnosticsPublisher:
         self._fleet = fleet
         self._ros: ros_node.RosNode | None = None
         self._publisher: Publisher | None = None
-        self._timer: Timer | None = None
+        self._task: int | None = None
 
     def start(self) -> None:
         """Join the graph (or share the node of this process's source) and publish every period."""
-        self._ros = ros_node.acquire(self._config.node_name, self._config.domain)
-        self._ros.call(self._begin)
+        ros = self._ros = ros_node.acquire(self._config.node_name, self._config.domain)
+        ros.call(lambda: self._begin(ros))
+        self._task = ros.every(self._config.fleet_period, self._publish)
         log.info("publishing the fleet's diagnostics on %s", self._config.fleet_topic)
 
     def stop(self) -> None:
         """Stop publishing and leave the graph."""
-        ros = self._ros
-        if ros is None:
-            return
-        self._ros = None
-        ros_node.leave(ros, self._end)
+        ros, self._ros = self._ros, None
+        if ros is not None:
+            ros_node.leave(ros, self._end)
 
-    def _begin(self) -> None:
-        assert self._ros is not None and self._config.fleet_topic is not None
+    def _begin(self, ros: ros_node.RosNode) -> None:
+        assert self._config.fleet_topic is not None
         qos = QoSProfile(  # type: ignore[no-untyped-call]
             history=HistoryPolicy.KEEP_LAST,
             depth=1,
             reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.VOLATILE,
         )
-        node = self._ros.node
-        self._publisher = node.create_publisher(RosDiagnosticArray, self._config.fleet_topic, qos)
-        self._timer = node.create_timer(self._config.fleet_period, self._publish)
+        self._publisher = ros.node.create_publisher(RosDiagnosticArray, self._config.fleet_topic, qos)
 
-    def _end(self) -> None:
-        assert self._ros is not None
-        if self._timer is not None:
-            self._ros.node.destroy_timer(self._timer)
+    def _end(self, ros: ros_node.RosNode) -> None:
+        if self._task is not None:
+            ros.cancel(self._task)
         if self._publisher is not None:
-            self._ros.node.destroy_publisher(self._publisher)
+            ros.node.destroy_publisher(self._publisher)
 
     def _publish(self) -> None:
         try:

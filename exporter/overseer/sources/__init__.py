@@ -39,7 +39,7 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
     if config.dds.enabled:
         from overseer.sources.dds.source import DdsSource
 
-        sources.append(DdsSource(config.dds, model, config.shard))
+        sources.append(DdsSource(config.dds, model, config.shard, config.robot_namespace_depth))
     if config.ros1.enabled:
         from overseer.sources.ros1.source import Ros1Source
 
@@ -48,7 +48,7 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
     if config.zenoh.enabled:
         from overseer.sources.zenoh.source import ZenohSource
 
-        sources.append(ZenohSource(config.zenoh, model, config.shard))
+        sources.append(ZenohSource(config.zenoh, model, config.shard, config.robot_namespace_depth))
     if config.ros2.enabled:
         from overseer.sources.ros2 import require_rclpy
 
@@ -56,5 +56,5 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
         from overseer.sources.ros2.source import Ros2Source, node_name
 
         name = node_name(config.ros2, config.shard.worker, config.shard.workers)
-        sources.append(Ros2Source(config.ros2, model, name, config.shard))
+        sources.append(Ros2Source(config.ros2, model, name, config.shard, config.robot_namespace_depth))
     return sources

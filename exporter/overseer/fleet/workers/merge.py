@@ -5,6 +5,7 @@ from __future__ import annotations
 import heapq
 import threading
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 from types import MappingProxyType
 from typing import Any
 
@@ -54,8 +55,13 @@ def portable_robots(snapshot: FleetSnapshot) -> list[RobotState]:
     return [_with_components(robot, dict(robot.components)) for robot in snapshot.robots]
 
 
-def merge_snapshots(parts: Sequence[FleetSnapshot], limits: FleetLimits, taken_at: float) -> FleetSnapshot:
-    """One snapshot of the fleet from the workers' snapshots (their robots made read-only again)."""
+def merge_snapshots(
+    parts: Sequence[FleetSnapshot], limits: FleetLimits, taken_at: float, generated_at: float
+) -> FleetSnapshot:
+    """One snapshot of the fleet from the workers' snapshots (their robots made read-only again).
+
+    `taken_at` is the monotonic time it is judged at, `generated_at` the wall clock then.
+    """
     robots = tuple(
         _with_components(robot, MappingProxyType(robot.components)) for part in parts for robot in part.robots
     )
@@ -67,7 +73,7 @@ def merge_snapshots(parts: Sequence[FleetSnapshot], limits: FleetLimits, taken_a
         _add(dropped, part.dropped_statuses)
         _add(errors, part.source_errors)
     truncated = sum(part.truncated_strings for part in parts)
-    return FleetSnapshot(taken_at, limits, robots, counts, dropped, truncated, errors)
+    return FleetSnapshot(taken_at, limits, robots, counts, dropped, truncated, errors, generated_at)
 
 
 def _add(total: dict[Any, Any], counts: Any) -> None:
@@ -76,17 +82,7 @@ def _add(total: dict[Any, Any], counts: Any) -> None:
 
 
 def _with_components(robot: RobotState, components: Any) -> RobotState:
-    return RobotState(
-        robot.name,
-        robot.transport,
-        robot.last_message,
-        components,
-        robot.discovered_at,
-        robot.revision,
-        robot.latest,
-        robot.missing,
-        robot.publisher_alive,
-    )
+    return replace(robot, components=components)
 
 
 CounterKey = tuple[Any, ...]

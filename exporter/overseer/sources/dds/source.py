@@ -1,7 +1,11 @@
 """The ROS 2 transport: join DDS domains with Cyclone DDS, discover robots, read raw diagnostics.
 
 Robots are found on the DDS built-in publication topic: every writer of `rt/<ns>/diagnostics_agg` or
-`rt/<ns>/diagnostics` is robot `<ns>`, so a robot that starts later is picked up with no restart.
+`rt/<ns>/diagnostics` is robot `<ns>`, so a robot that starts later is picked up with no restart. A writer
+of an un-namespaced topic (`rt/diagnostics`, where diagnostic_updater publishes whatever its node's
+namespace) belongs to the robot its node's namespace names, read from the ROS graph the robot's rmw
+publishes (`node_graph.py`, `robot_naming.py`); on a domain given a `robot_name`, to that one robot.
+Each writer is a feed of its robot: nodes sharing one robot's `/diagnostics` each send their own statuses.
 Samples are taken as raw CDR and decoded by `overseer.codec.cdr`, which is faster than the generic
 deserializer and turns a malformed payload into a counted `decode_error` instead of an exception.
 
@@ -18,6 +22,8 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,6 +37,7 @@ from cyclonedds.util import duration
 
 from overseer.codec import DecodeError, cdr
 from overseer.config.dds import DdsConfig, DdsPeer, DomainConfig
+from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
@@ -41,14 +48,20 @@ from overseer.sources.dds.cyclone_config import (
     peers_config,
 )
 from overseer.sources.dds.cyclone_log import CycloneWarnings
+from overseer.sources.dds.node_graph import NodeGraph
 from overseer.sources.dds.peers import peer_addresses
 from overseer.sources.dds.types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
+from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
 log = logging.getLogger(__name__)
 
 TRANSPORT = "dds"
 DISCOVERY_INTERVAL_SECONDS = 0.2
+# How long a writer of an un-namespaced topic waits for its node to appear in the graph before it is taken
+# for the domain's robot (a DDS application that is no ROS 2 node never appears there).
+ATTRIBUTION_GRACE_SECONDS = 3.0
+MAX_PENDING_SAMPLES = 16  # per writer, while its robot is not known yet
 _TAKE_BATCH = 64
 _ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
 
@@ -64,13 +77,29 @@ BEST_EFFORT_QOS = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile,
 
 
 @dataclass
+class _Writer:
+    """One DDS writer of a diagnostics topic: its robot once known, and the ingest of its feed."""
+
+    topic: str
+    kind: str
+    guid: bytes
+    robot: str | None
+    seen_at: float  # monotonic
+    ingest: PayloadIngest | None = None
+    ignored: bool = False  # another worker's robot, the robot cap, or raw beside aggregated
+    pending: list[bytes] = field(default_factory=list)  # samples heard before its robot was known
+
+
+@dataclass
 class _DomainSession:
     config: DomainConfig
+    naming: RobotNaming
     participant: DomainParticipant
     subscriber: Subscriber
     publications: BuiltinDataReader
+    graph: NodeGraph | None  # the ROS graph, where un-namespaced topics are named by their nodes
     readers: dict[str, DataReader[DiagnosticArray]] = field(default_factory=dict)
-    writers: dict[Any, str] = field(default_factory=dict)  # publication key → DDS topic name
+    writers: dict[int, _Writer] = field(default_factory=dict)  # by publication (instance) handle
     best_effort_topics: set[str] = field(default_factory=set)  # a writer of each is best-effort
 
 
@@ -79,12 +108,22 @@ class DdsSource:
 
     transport = TRANSPORT
 
-    def __init__(self, config: DdsConfig, model: FleetModel, shard: Shard | None = None) -> None:
+    def __init__(
+        self,
+        config: DdsConfig,
+        model: FleetModel,
+        shard: Shard | None = None,
+        namespace_depth: int = DEFAULT_NAMESPACE_DEPTH,
+    ) -> None:
         """Feed `model` from the domains in `config`, following only `shard`'s robots; joins on `start`."""
         self._config = config
         self._model = model
         self._shard = shard or Shard()
+        self._namespace_depth = namespace_depth
         self._sessions: list[_DomainSession] = []
+        self._lock = threading.Lock()  # the writers' pending samples and ingests, between listener threads
+        self._robot_writers: Counter[str] = Counter()  # robot → its live writers, across domains
+        self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -100,8 +139,13 @@ class DdsSource:
             configure_domain(domain_config.id, config)
             participant = DomainParticipant(domain_config.id)
             publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+            subscriber = Subscriber(participant)
+            naming = RobotNaming(
+                domain_config.unnamespaced_robot, domain_config.robot_name is not None, self._namespace_depth
+            )
+            graph = None if naming.named else NodeGraph(participant, subscriber)
             self._sessions.append(
-                _DomainSession(domain_config, participant, Subscriber(participant), publications)
+                _DomainSession(domain_config, naming, participant, subscriber, publications, graph)
             )
         self._discover()
         self._thread = threading.Thread(target=self._discovery_loop, name="dds-discovery", daemon=True)
@@ -147,43 +191,109 @@ class DdsSource:
 
     def _discover(self) -> None:
         for session in self._sessions:
+            graph_changed = session.graph is not None and session.graph.poll()
             for sample in session.publications.take(N=256):
+                handle = sample.sample_info.instance_handle
                 topic_name = sample.topic_name
                 if topic_name is None:
-                    left = session.writers.pop(sample.key, None)
-                    if left is not None:
-                        self._writer_left(session, left)
+                    self._writer_left(session, handle)
                     continue
-                if parse_dds_topic(topic_name) is None:
+                parsed = parse_dds_topic(topic_name)
+                if parsed is None or parsed.kind not in self._config.topics:
                     continue
                 if sample.type_name != DIAGNOSTIC_ARRAY_TYPE_NAME:
                     log.warning(
                         "ignoring %s on domain %d: type %s", topic_name, session.config.id, sample.type_name
                     )
                     continue
-                session.writers[sample.key] = topic_name
                 if sample.qos[Policy.Reliability] == Policy.Reliability.BestEffort:
                     self._read_best_effort(session, topic_name)
                 self._subscribe(session, topic_name)
-                robot = self._robot_of(session, topic_name)
+                robot = session.naming.of_topic(parsed.namespace)
+                with self._lock:
+                    writer = session.writers.get(handle)
+                    if writer is None:
+                        writer = session.writers[handle] = _Writer(topic_name, parsed.kind, b"", None, 0.0)
+                    if writer.guid:
+                        continue  # known already (a writer's QoS changed)
+                    writer.topic, writer.kind, writer.guid = topic_name, parsed.kind, sample.key.bytes
+                    writer.seen_at = time.monotonic()
                 if robot is not None:
-                    self._model.set_publisher_alive(robot, True)
+                    self._adopt(writer, robot)
+            if graph_changed or any(w.robot is None for w in session.writers.values()):
+                self._attribute(session)
 
-    def _robot_of(self, session: _DomainSession, topic_name: str) -> str | None:
-        parsed = parse_dds_topic(topic_name)
-        return None if parsed is None else parsed.namespace or session.config.unnamespaced_robot
+    def _attribute(self, session: _DomainSession) -> None:
+        """Name the robots of un-namespaced topics' writers by their nodes, or the domain's after a grace."""
+        now = time.monotonic()
+        for writer in list(session.writers.values()):
+            if writer.robot is not None or not writer.guid:
+                continue
+            node = None if session.graph is None else session.graph.node_of(writer.guid)
+            if node is not None:
+                robot = session.naming.of_node(node.namespace)
+                if robot is None:
+                    self._model.count_source_error(TRANSPORT, "invalid_namespace")
+                    log.warning("node %r has an invalid namespace %r", node.name, node.namespace)
+                    robot = session.naming.unnamespaced_robot
+            elif now - writer.seen_at >= ATTRIBUTION_GRACE_SECONDS:
+                robot = session.naming.unnamespaced_robot
+                log.info("a writer of %s is no ROS 2 node's: robot %s", writer.topic, robot)
+            else:
+                continue
+            self._adopt(writer, robot)
 
-    def _writer_left(self, session: _DomainSession, topic_name: str) -> None:
-        """A writer of `topic_name` left: its robot is down at once when no writer of its topics is left."""
-        robot = self._robot_of(session, topic_name)
-        if robot is None:
+    def _adopt(self, writer: _Writer, robot: str) -> None:
+        """Follow `writer` as a feed of `robot` (when this source follows the robot), its pending first."""
+        writer.robot = robot
+        self._robot_writers[robot] += 1
+        if not self._shard.owns(robot):
+            writer.ignored = True
+        elif writer.kind == RAW and robot in self._aggregated and AGGREGATED in self._config.topics:
+            writer.ignored = True  # the robot's aggregator says it all
+        elif not self._model.register(robot, TRANSPORT):
+            writer.ignored = True
+            log.warning("robot cap reached; not following robot %s (%s)", robot, writer.topic)
+        if writer.ignored:
+            with self._lock:
+                writer.pending.clear()
             return
-        remaining = {
-            self._robot_of(other, name) for other in self._sessions for name in other.writers.values()
-        }
-        if robot not in remaining:
-            self._model.set_publisher_alive(robot, False)
-            log.info("robot %s: its last diagnostics writer left", robot)
+        if writer.kind == AGGREGATED and self._config.prefer_aggregated and robot not in self._aggregated:
+            self._aggregated.add(robot)
+            self._ignore_raw(robot)
+        feed = f"{writer.topic}@{writer.guid.hex()}"
+        ingest = PayloadIngest(self._model, robot, TRANSPORT, writer.topic, cdr.WIRE_FORMAT, feed)
+        while True:  # what arrived meanwhile, in order, before new samples go straight to the ingest
+            with self._lock:
+                pending, writer.pending = writer.pending, []
+                if not pending:
+                    writer.ingest = ingest
+                    break
+            for payload in pending:
+                _ingest(ingest, payload, writer.topic)
+        log.info("following robot %s (%s, writer %s)", robot, writer.topic, writer.guid.hex())
+
+    def _ignore_raw(self, robot: str) -> None:
+        """Leave a robot's raw diagnostics writers once it has an aggregator: forget what they said."""
+        for session in self._sessions:
+            for writer in session.writers.values():
+                if writer.robot == robot and writer.kind == RAW and not writer.ignored:
+                    writer.ignored, writer.ingest = True, None
+                    self._model.forget_topic(robot, writer.topic)
+
+    def _writer_left(self, session: _DomainSession, handle: int) -> None:
+        """A writer left: its robot is down at once when no writer of its diagnostics is left."""
+        with self._lock:
+            writer = session.writers.pop(handle, None)
+        if writer is None or writer.robot is None:
+            return
+        robot = writer.robot
+        self._robot_writers[robot] -= 1
+        if self._robot_writers[robot] <= 0:
+            del self._robot_writers[robot]
+            if self._shard.owns(robot):
+                self._model.publisher_left(robot)
+                log.info("robot %s: its last diagnostics writer left", robot)
 
     def _read_best_effort(self, session: _DomainSession, topic_name: str) -> None:
         """From now on read `topic_name` best-effort: a reliable reader never hears its new writer."""
@@ -201,27 +311,23 @@ class DdsSource:
         parsed = parse_dds_topic(topic_name)
         if parsed is None or topic_name in session.readers or parsed.kind not in self._config.topics:
             return
-        robot = parsed.namespace or session.config.unnamespaced_robot
-        if not self._shard.owns(robot):
+        robot = session.naming.of_topic(parsed.namespace)
+        if robot is not None and not self._shard.owns(robot):
             return
-        sibling = topic_name[: -len(parsed.kind)] + (RAW if parsed.kind == AGGREGATED else AGGREGATED)
-        if self._config.prefer_aggregated and AGGREGATED in self._config.topics:
+        if parsed.namespace and self._config.prefer_aggregated and AGGREGATED in self._config.topics:
+            sibling = topic_name[: -len(parsed.kind)] + (RAW if parsed.kind == AGGREGATED else AGGREGATED)
             if parsed.kind == RAW and sibling in session.readers:
-                return
+                return  # a namespaced robot's raw topic is not even read beside its aggregator's
             if parsed.kind == AGGREGATED and sibling in session.readers:
                 session.readers.pop(sibling).__del__()
-                self._model.forget_topic(robot, sibling)
-        if not self._model.register(robot, TRANSPORT):
-            log.warning("robot cap reached; not following %s on domain %d", topic_name, session.config.id)
-            return
         qos = BEST_EFFORT_QOS if topic_name in session.best_effort_topics else ROS_DEFAULT_QOS
         topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
-        listener = Listener(on_data_available=self._on_data_callback(robot, topic_name))  # type: ignore[no-untyped-call]
+        listener = Listener(on_data_available=self._on_data_callback(session, topic_name))  # type: ignore[no-untyped-call]
         session.readers[topic_name] = DataReader(session.subscriber, topic, qos=qos, listener=listener)
-        log.info("following robot %s on domain %d (%s)", robot, session.config.id, topic_name)
+        log.info("reading %s on domain %d", topic_name, session.config.id)
 
-    def _on_data_callback(self, robot: str, topic_name: str) -> Any:
-        ingest = PayloadIngest(self._model, robot, TRANSPORT, topic_name, cdr.WIRE_FORMAT)
+    def _on_data_callback(self, session: _DomainSession, topic_name: str) -> Any:
+        writers = session.writers
 
         def on_data_available(reader: DataReader[DiagnosticArray]) -> None:
             try:
@@ -231,14 +337,38 @@ class DdsSource:
                         log.warning("take on %s failed with DDS error %d", topic_name, samples)
                         return
                     for data, info in samples:
-                        if info.valid_data:
-                            try:
-                                ingest(data)
-                            except DecodeError as error:
-                                log.debug("undecodable sample on %s: %s", topic_name, error)
+                        if not info.valid_data:
+                            continue
+                        writer = writers.get(info.publication_handle)
+                        ingest = None if writer is None else writer.ingest
+                        if ingest is None:
+                            ingest = self._hold(session, info.publication_handle, topic_name, data)
+                        if ingest is not None:
+                            _ingest(ingest, data, topic_name)
                     if len(samples) < _TAKE_BATCH:
                         return
             except Exception:  # a callback from the DDS thread must never raise
                 log.exception("failed to process diagnostics from %s", topic_name)
 
         return on_data_available
+
+    def _hold(self, session: _DomainSession, handle: int, topic: str, data: bytes) -> PayloadIngest | None:
+        """Keep a sample whose writer's robot is not known yet; its ingest when it became known meanwhile."""
+        with self._lock:
+            writer = session.writers.get(handle)
+            if writer is None:  # data before its discovery sample was read
+                writer = session.writers[handle] = _Writer(topic, "", b"", None, time.monotonic())
+            if writer.ingest is not None or writer.ignored:
+                return writer.ingest
+            if len(writer.pending) < MAX_PENDING_SAMPLES:
+                writer.pending.append(data)
+            else:
+                writer.pending[-1] = data  # the newest says the most
+            return None
+
+
+def _ingest(ingest: PayloadIngest, payload: bytes, topic: str) -> None:
+    try:
+        ingest(payload)
+    except DecodeError as error:
+        log.debug("undecodable sample on %s: %s", topic, error)

@@ -54,3 +54,28 @@ class DiagnosticArray(IdlStruct, typename="diagnostic_msgs.msg.dds_.DiagnosticAr
 
     header: Header
     status: types.sequence[DiagnosticStatus]
+
+
+@dataclass
+class Gid(IdlStruct, typename="rmw_dds_common.msg.dds_.Gid_"):
+    """rmw_dds_common/msg/Gid (Iron and later: 16 bytes)."""
+
+    data: types.array[types.uint8, 16]
+
+
+@dataclass
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common.msg.dds_.NodeEntitiesInfo_"):
+    """rmw_dds_common/msg/NodeEntitiesInfo."""
+
+    node_namespace: types.bounded_str[256]
+    node_name: types.bounded_str[256]
+    reader_gid_seq: types.sequence[Gid]
+    writer_gid_seq: types.sequence[Gid]
+
+
+@dataclass
+class ParticipantEntitiesInfo(IdlStruct, typename="rmw_dds_common.msg.dds_.ParticipantEntitiesInfo_"):
+    """rmw_dds_common/msg/ParticipantEntitiesInfo: a process's nodes and their endpoints."""
+
+    gid: Gid
+    node_entities_info_seq: types.sequence[NodeEntitiesInfo]

@@ -143,8 +143,6 @@ class _RobotLink:
         self.idle_timeout = idle_timeout
         self._stop = threading.Event()
         self._lock = threading.Lock()
-        self._apply_lock = threading.Lock()
-        self._ingest = PayloadIngest(model, robot.name, TRANSPORT, self.topic, WIRE_FORMAT)
         self._publishers: dict[str, _PublisherLink] = {}
         self._retired: list[_PublisherLink] = []
         self._caller_api: str | None = None
@@ -235,14 +233,11 @@ class _RobotLink:
                     self._publishers[uri] = link
                     link.start()
 
-    def receive(self, payload: bytes) -> None:
-        """Apply one frame's payload to the model (DecodeError when it is not a DiagnosticArray).
-
-        A payload that differs from the robot's last one only in seq and stamp just refreshes the robot,
-        with no decoding; the lock keeps "last one" true when several publishers feed one robot.
-        """
-        with self._apply_lock:
-            self._ingest(payload)
+    def ingest_for(self, publisher: str) -> PayloadIngest:
+        """The ingest of one publisher's feed of the robot's topic: each node sends its own statuses."""
+        return PayloadIngest(
+            self.model, self.robot.name, TRANSPORT, self.topic, WIRE_FORMAT, f"{self.topic}@{publisher}"
+        )
 
     def _close(self, registered: bool) -> None:
         if registered and self._caller_api is not None:
@@ -282,6 +277,7 @@ class _PublisherLink:
     def __init__(self, robot: _RobotLink, uri: str) -> None:
         self.robot = robot
         self.uri = uri
+        self._ingest = robot.ingest_for(uri)  # a payload like its last one only refreshes its statuses
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._sock: socket.socket | None = None
@@ -361,7 +357,7 @@ class _PublisherLink:
             )
             self._announce = False
             while True:
-                robot.receive(read_frame(sock))
+                self._ingest(read_frame(sock))
                 backoff.reset()
         except DecodeError as error:  # already counted as decode_error by the ingest
             return "decode_error", f"undecodable message: {error}"

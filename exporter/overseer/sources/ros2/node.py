@@ -1,38 +1,38 @@
-"""The process's ROS 2 node: an rclpy context of its own, one node, one executor thread that does it all.
+"""The process's ROS 2 node: an rclpy context of its own, one node, and one thread that does its work.
 
-Every rclpy call on the node runs in the executor's thread: the source's discovery timer, its raw
-subscriptions' callbacks and their matched events, and whatever another thread hands over with `call`.
-The executor is rclpy's EventsExecutor (no wait set rebuilt for every wake-up: about 5 % of a core for
-1,000 subscriptions at 1 Hz, against a whole core for the SingleThreadedExecutor), driven by `spin_once`
-(its `spin` busy-loops in rclpy 7.1.6). A source and the fleet publisher of one process share the node.
+No executor spins the node: the source takes its subscriptions' messages through rcl as they arrive
+(`rcl_take.py`), so nothing here waits on a wait set. The node's thread runs what the node's users ask
+of it, in order: calls handed over from other threads (`call`) and periodic tasks (`every`: the source's
+look at the graph, the fleet publisher's array). Every rclpy call on the node runs in that thread. A
+source and the fleet publisher of one process share the node.
 """
 
 from __future__ import annotations
 
 import atexit
+import heapq
+import itertools
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any, TypeVar
 
 import rclpy
 from rclpy.context import Context
-from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 log = logging.getLogger(__name__)
 
-SPIN_TIMEOUT_SECONDS = 0.25
-CALLS_PERIOD_SECONDS = 0.05  # how often the executor looks for calls from other threads (it has no guard
-# conditions to be woken by: a timer does it, for a few microseconds twenty times a second)
+IDLE_WAIT_SECONDS = 0.25
 T = TypeVar("T")
 
 
 class RosNode:
-    """One rclpy node in a context of its own, spun by an executor thread; started by `acquire`."""
+    """One rclpy node in a context of its own, and the thread that runs its work; started by `acquire`."""
 
     def __init__(self, name: str, domain: int) -> None:
         """Join ROS domain `domain` as node `name`: rclpy's signal handlers stay off (the exporter's own)."""
@@ -41,48 +41,70 @@ class RosNode:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node(name, context=self.context, start_parameter_services=False, enable_rosout=False)
-        self._executor = EventsExecutor(context=self.context)
-        self._executor.add_node(self.node)
-        self._calls: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]]] = queue.SimpleQueue()
-        self._calls_timer = self.node.create_timer(CALLS_PERIOD_SECONDS, self._run_calls)
+        self._calls: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]] | None] = queue.SimpleQueue()
+        self._tasks: list[tuple[float, int, float, Callable[[], None]]] = []  # (due, id, period, task)
+        self._cancelled: set[int] = set()
+        self._ids = itertools.count()
         self._stopping = threading.Event()
-        self._thread = threading.Thread(target=self._spin, name=f"ros2-{name}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"ros2-{name}", daemon=True)
         self._thread.start()
 
     def call(self, function: Callable[[], T], timeout: float = 30.0) -> T:
-        """Run `function` in the executor's thread and return what it returns (or raise what it raises)."""
+        """Run `function` in the node's thread and return what it returns (or raise what it raises)."""
         if threading.current_thread() is self._thread:
             return function()
         done: Future[T] = Future()
         self._calls.put((function, done))
         return done.result(timeout)
 
+    def every(self, period: float, task: Callable[[], None]) -> int:
+        """Run `task` in the node's thread every `period` seconds from now on; an id for `cancel`."""
+        task_id = next(self._ids)
+        self.call(lambda: heapq.heappush(self._tasks, (time.monotonic() + period, task_id, period, task)))
+        return task_id
+
+    def cancel(self, task_id: int) -> None:
+        """Run the task `every` returned `task_id` for no more."""
+        self.call(lambda: self._cancelled.add(task_id))
+
     def close(self) -> None:
-        """Stop spinning, leave the graph and shut the context down."""
+        """Stop the thread, leave the graph and shut the context down."""
         self._stopping.set()
+        self._calls.put(None)
         self._thread.join(timeout=10)
-        self._executor.shutdown()
         self.node.destroy_node()  # type: ignore[no-untyped-call]
         self.context.try_shutdown()
 
-    def _run_calls(self) -> None:
-        while True:
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            wait = IDLE_WAIT_SECONDS
+            if self._tasks:
+                wait = min(wait, max(0.0, self._tasks[0][0] - time.monotonic()))
             try:
-                function, done = self._calls.get_nowait()
+                item = self._calls.get(timeout=wait)
             except queue.Empty:
-                return
-            if done.set_running_or_notify_cancel():
-                try:
-                    done.set_result(function())
-                except Exception as error:  # handed to the caller
-                    done.set_exception(error)
+                item = None
+            if item is not None:
+                function, done = item
+                if done.set_running_or_notify_cancel():
+                    try:
+                        done.set_result(function())
+                    except Exception as error:  # handed to the caller
+                        done.set_exception(error)
+            self._run_due_tasks()
 
-    def _spin(self) -> None:
-        while not self._stopping.is_set() and self.context.ok():
+    def _run_due_tasks(self) -> None:
+        now = time.monotonic()
+        while self._tasks and self._tasks[0][0] <= now and not self._stopping.is_set():
+            _, task_id, period, task = heapq.heappop(self._tasks)
+            if task_id in self._cancelled:
+                self._cancelled.discard(task_id)
+                continue
             try:
-                self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_SECONDS)
-            except Exception:  # one failing callback must not end the node
-                log.exception("ROS 2 executor callback failed")
+                task()
+            except Exception:  # one failing task must not end the node's work
+                log.exception("ROS 2 node task failed")
+            heapq.heappush(self._tasks, (max(now, time.monotonic()) + period, task_id, period, task))
 
 
 _lock = threading.Lock()
@@ -102,7 +124,7 @@ def acquire(name: str, domain: int) -> RosNode:
 
 @atexit.register
 def _close_all() -> None:
-    """Close the nodes still open at exit: a thread still spinning then would abort the interpreter."""
+    """Close the nodes still open at exit, so that each leaves the graph cleanly."""
     with _lock:
         open_nodes = [node for node, _ in _nodes.values()]
         _nodes.clear()
@@ -110,10 +132,10 @@ def _close_all() -> None:
         node.close()
 
 
-def leave(node: RosNode, end: Callable[[], None]) -> None:
-    """Run `end` (a user's clean-up of its entities) on the node's thread, then `release` the node."""
+def leave(node: RosNode, end: Callable[[RosNode], None]) -> None:
+    """Run `end(node)` (a user's clean-up of its entities) on the node's thread, then `release` the node."""
     try:
-        node.call(end)
+        node.call(lambda: end(node))
     finally:
         release(node)
 

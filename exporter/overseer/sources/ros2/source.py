@@ -1,32 +1,39 @@
 """The rclpy transport: the exporter as a ROS 2 node, reading every robot's diagnostics topics raw.
 
 Robots are found in the ROS graph: every topic `<ns>/diagnostics_agg` or `<ns>/diagnostics` of type
-`diagnostic_msgs/msg/DiagnosticArray` is robot `<ns>` (the DDS source's naming rules). Each topic gets a
-raw subscription, whose bytes go to the same ingest as every transport's (skip-unchanged, the compiled
-decoder, the caps). Its QoS follows the topic's publishers: reliable while every one of them is, best-effort
-from the first best-effort one on (a reliable subscription never hears it; rclpy says so in an
-incompatible-QoS event, and the subscription is made again). Each subscription's matched event tells when
-a robot's diagnostics publishers have all left the graph: the robot is down at once, as with Zenoh's
-liveliness. Everything runs in the node's executor thread (`node.py`).
+`diagnostic_msgs/msg/DiagnosticArray` is robot `<ns>` (the DDS source's naming rules, `robot_naming.py`).
+A message on an un-namespaced topic (diagnostic_updater publishes on the absolute `/diagnostics` whatever
+its node's namespace) belongs to the robot its publisher's node names: rcl tells each message's publisher
+GID (`rcl_take.py`), the graph each publisher's node. Each publisher is a feed of its robot, whose bytes go
+to the same ingest as every transport's (skip-unchanged, the compiled decoder, the caps).
+
+A topic's subscription is reliable while every publisher of it is, best-effort from the first best-effort
+one on (a reliable subscription never hears it). The graph also tells when a robot's diagnostics
+publishers have all left: the robot is down at once, as with Zenoh's liveliness. Graph work runs in the
+node's thread (`node.py`); messages are taken in a thread of the source's own as rcl says they arrive.
 """
 
 from __future__ import annotations
 
 import logging
+import queue
+import threading
+import time
 from dataclasses import dataclass, field
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
-from rclpy.timer import Timer
 
 from overseer.codec import DecodeError, cdr
+from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.ros2 import Ros2Config
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.ros2 import node as ros_node
+from overseer.sources.ros2.rcl_take import RawTaker, on_new_message
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_ros_topic
 
 log = logging.getLogger(__name__)
@@ -34,7 +41,10 @@ log = logging.getLogger(__name__)
 TRANSPORT = "ros2"
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 DISCOVERY_PERIOD_SECONDS = 0.5
+ATTRIBUTION_GRACE_SECONDS = 3.0  # a publisher whose node the graph does not tell by then: the domain's robot
+MAX_PENDING_MESSAGES = 16  # per publisher, while its robot is not known yet
 QUEUE_DEPTH = 10  # a topic's messages between two takes: every node of a robot may publish /diagnostics
+_UNKNOWN_NAMESPACE = "_NODE_NAMESPACE_UNKNOWN_"  # what rclpy says before a publisher's node is known
 
 
 def subscription_qos(reliable: bool) -> QoSProfile:
@@ -48,14 +58,32 @@ def subscription_qos(reliable: bool) -> QoSProfile:
 
 
 @dataclass
-class _Feed:
-    """One followed topic: its robot, its subscription, and how many publishers it matches now."""
+class _Publisher:
+    """One publisher of a followed topic: its robot once known, and the ingest of its feed."""
 
-    robot: str
+    gid: bytes
+    robot: str | None
+    seen_at: float  # monotonic
+    in_graph: bool = False  # adopted from the graph, which then tells when it leaves
+    ingest: PayloadIngest | None = None
+    ignored: bool = False  # another worker's robot, the robot cap, or raw beside aggregated
+    pending: list[bytes] = field(default_factory=list)
+
+
+@dataclass
+class _Topic:
+    """One followed topic: its subscription, and the publishers heard on it or seen in the graph."""
+
+    name: str
+    kind: str
+    robot: str | None  # None: an un-namespaced topic, whose publishers' nodes name their robots
     subscription: Subscription
     reliable: bool
-    publishers: int = 0
-    ingest: PayloadIngest | None = field(default=None, repr=False)
+    callback: object = None  # rcl's handle of the new-message callback, kept alive while it is set
+    publishers: dict[bytes, _Publisher] = field(default_factory=dict)
+    graph_count: int = -1  # publishers in the graph at the last look
+    dirty: bool = True  # look up its publishers in the graph at the next discovery
+    closed: bool = False
 
 
 class Ros2Source:
@@ -64,141 +92,258 @@ class Ros2Source:
     transport = TRANSPORT
 
     def __init__(
-        self, config: Ros2Config, model: FleetModel, node_name: str, shard: Shard | None = None
+        self,
+        config: Ros2Config,
+        model: FleetModel,
+        node_name: str,
+        shard: Shard | None = None,
+        namespace_depth: int = DEFAULT_NAMESPACE_DEPTH,
     ) -> None:
         """Feed `model`; the node joins the graph on `start`."""
         self._config = config
         self._model = model
         self._node_name = node_name
         self._shard = shard or Shard()
+        self._naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
         self._ros: ros_node.RosNode | None = None
-        self._feeds: dict[str, _Feed] = {}
-        self._robot_topics: dict[str, set[str]] = {}
+        self._task: int | None = None
+        self._topics: dict[str, _Topic] = {}
         self._ignored: set[str] = set()  # topics not ours: another type, another shard, the cap
-        self._timer: Timer | None = None
+        self._lock = threading.Lock()  # publishers' pending messages and ingests, between the two threads
+        self._taking = threading.Lock()  # held while messages are taken: a subscription goes only between
+        self._arrived: queue.SimpleQueue[_Topic | None] = queue.SimpleQueue()
+        self._taker: threading.Thread | None = None
+        self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) in the graph
+        self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
 
     def start(self) -> None:
-        """Join the graph and look for robots every `DISCOVERY_PERIOD_SECONDS` from now on."""
+        """Join the graph, take messages as they arrive, and look for robots every period from now on."""
         self._ros = ros_node.acquire(self._node_name, self._config.domain)
-        self._ros.call(self._begin)
+        self._taker = threading.Thread(target=self._take_loop, name="ros2-take", daemon=True)
+        self._taker.start()
+        self._ros.call(self._discover)
+        self._task = self._ros.every(DISCOVERY_PERIOD_SECONDS, self._discover)
 
     def stop(self) -> None:
         """Unsubscribe and leave the graph."""
-        ros = self._ros
+        ros, self._ros = self._ros, None
         if ros is None:
             return
-        self._ros = None
         ros_node.leave(ros, self._end)
+        self._arrived.put(None)
+        if self._taker is not None:
+            self._taker.join(timeout=5)
 
     @property
     def followed_topics(self) -> dict[str, bool]:
         """Every topic followed now, and whether its subscription is reliable."""
-        return {topic: feed.reliable for topic, feed in self._feeds.items()}
+        return {name: topic.reliable for name, topic in self._topics.items()}
 
-    def _begin(self) -> None:
-        assert self._ros is not None
-        self._timer = self._ros.node.create_timer(DISCOVERY_PERIOD_SECONDS, self._discover)
-        self._discover()
-
-    def _end(self) -> None:
-        assert self._ros is not None
-        node = self._ros.node
-        if self._timer is not None:
-            node.destroy_timer(self._timer)
-        for feed in self._feeds.values():
-            node.destroy_subscription(feed.subscription)
-        self._feeds.clear()
+    def _end(self, ros: ros_node.RosNode) -> None:
+        if self._task is not None:
+            ros.cancel(self._task)
+        for name in list(self._topics):
+            self._unfollow(ros, name)
 
     def _discover(self) -> None:
-        assert self._ros is not None
-        for topic, types in self._ros.node.get_topic_names_and_types():
-            if topic in self._feeds or topic in self._ignored:
+        ros = self._ros
+        if ros is None:
+            return
+        node = ros.node
+        for name, types in node.get_topic_names_and_types():
+            if name in self._topics or name in self._ignored:
                 continue
-            parsed = parse_ros_topic(topic)
+            parsed = parse_ros_topic(name)
             if parsed is None or parsed.kind not in self._config.topics:
                 continue
             if MESSAGE_TYPE not in types:
-                self._ignored.add(topic)
+                self._ignored.add(name)
                 self._model.count_source_error(TRANSPORT, "unexpected_type")
-                log.warning("ignoring %s: type %s, not %s", topic, ", ".join(types), MESSAGE_TYPE)
+                log.warning("ignoring %s: type %s, not %s", name, ", ".join(types), MESSAGE_TYPE)
                 continue
-            robot = parsed.namespace or self._config.unnamespaced_robot
-            if not self._shard.owns(robot):
-                self._ignored.add(topic)
+            robot = self._naming.of_topic(parsed.namespace)
+            if robot is not None and not self._shard.owns(robot):
+                self._ignored.add(name)
                 continue
-            self._follow(topic, robot, parsed.kind)
+            if robot is not None and parsed.kind == RAW and self._prefers_aggregated(name, parsed.kind):
+                continue  # a namespaced robot's raw topic is not even read beside its aggregator's
+            self._follow(ros, name, parsed.kind, robot)
+        for topic in list(self._topics.values()):
+            count = node.count_publishers(topic.name)
+            unknown = any(publisher.robot is None for publisher in topic.publishers.values())
+            if count != topic.graph_count or topic.dirty or unknown:
+                topic.graph_count = count
+                topic.dirty = False
+                self._look_up_publishers(ros, topic)
 
-    def _follow(self, topic: str, robot: str, kind: str) -> None:
-        sibling = topic[: -len(kind)] + (RAW if kind == AGGREGATED else AGGREGATED)
-        if self._config.prefer_aggregated and AGGREGATED in self._config.topics:
-            if kind == RAW and sibling in self._feeds:
+    def _prefers_aggregated(self, topic: str, kind: str) -> bool:
+        preferred = self._config.prefer_aggregated and AGGREGATED in self._config.topics
+        return preferred and topic[: -len(kind)] + AGGREGATED in self._topics
+
+    def _follow(self, ros: ros_node.RosNode, name: str, kind: str, robot: str | None) -> None:
+        if robot is not None and kind == AGGREGATED and self._config.prefer_aggregated:
+            sibling = name[: -len(kind)] + RAW
+            if sibling in self._topics:
+                self._unfollow(ros, sibling)
+        self._subscribe(ros, name, kind, robot, reliable=True)
+        log.info("following %s over ROS 2", name)
+
+    def _subscribe(
+        self, ros: ros_node.RosNode, name: str, kind: str, robot: str | None, reliable: bool
+    ) -> None:
+        subscription = ros.node.create_subscription(
+            DiagnosticArray, name, lambda _: None, subscription_qos(reliable), raw=True
+        )
+        previous = self._topics.get(name)
+        topic = _Topic(name, kind, robot, subscription, reliable)
+        if previous is not None:
+            topic.publishers = previous.publishers
+        self._topics[name] = topic
+        topic.callback = on_new_message(subscription.handle.pointer, lambda _count: self._arrived.put(topic))
+        self._arrived.put(topic)  # what arrived before the callback was set
+
+    def _unfollow(self, ros: ros_node.RosNode, name: str) -> None:
+        topic = self._topics.pop(name)
+        with self._taking:
+            topic.closed = True
+            on_new_message(topic.subscription.handle.pointer, None)
+            ros.node.destroy_subscription(topic.subscription)
+
+    def _look_up_publishers(self, ros: ros_node.RosNode, topic: _Topic) -> None:
+        """The topic's publishers in the graph: their QoS, their nodes, and which have left.
+
+        A publisher's node names the robot of an un-namespaced topic.
+        """
+        node = ros.node
+        own = node.get_name()
+        infos = [info for info in node.get_publishers_info_by_topic(topic.name) if info.node_name != own]
+        best_effort = ReliabilityPolicy.BEST_EFFORT
+        if topic.reliable and any(info.qos_profile.reliability == best_effort for info in infos):
+            log.info("reading %s best-effort, as a publisher of it is", topic.name)
+            self._unfollow(ros, topic.name)
+            self._subscribe(ros, topic.name, topic.kind, topic.robot, reliable=False)
+            topic = self._topics[topic.name]
+        now = time.monotonic()
+        in_graph: dict[bytes, str | None] = {}
+        for info in infos:
+            gid = bytes(info.endpoint_gid)
+            robot = topic.robot
+            if robot is None and info.node_namespace != _UNKNOWN_NAMESPACE:
+                robot = self._naming.of_node(info.node_namespace)
+                if robot is None:
+                    self._model.count_source_error(TRANSPORT, "invalid_namespace")
+                    robot = self._naming.unnamespaced_robot
+            in_graph[gid] = robot
+        for gid, robot in in_graph.items():
+            with self._lock:
+                publisher = topic.publishers.setdefault(gid, _Publisher(gid, None, now))
+            if publisher.robot is None and robot is not None:
+                publisher.in_graph = True
+                self._adopt(topic, publisher, robot)
+        for gid, publisher in list(topic.publishers.items()):
+            if gid in in_graph:
+                continue
+            if publisher.robot is None and now - publisher.seen_at >= ATTRIBUTION_GRACE_SECONDS:
+                self._adopt(topic, publisher, self._naming.unnamespaced_robot)  # heard, never in the graph
+            elif publisher.in_graph:
+                with self._lock:
+                    del topic.publishers[gid]
+                self._publisher_left(topic, publisher)
+
+    def _adopt(self, topic: _Topic, publisher: _Publisher, robot: str) -> None:
+        """Follow `publisher` as a feed of `robot` (when this source follows the robot), its pending first.
+
+        Only the node's thread adopts, so what it keeps of robots needs no lock.
+        """
+        publisher.robot = robot
+        self._robot_publishers.setdefault(robot, set()).add((topic.name, publisher.gid))
+        if not self._shard.owns(robot):
+            publisher.ignored = True
+        elif topic.kind == RAW and robot in self._aggregated:
+            publisher.ignored = True  # the robot's aggregator says it all
+        elif not self._model.register(robot, TRANSPORT):
+            publisher.ignored = True
+            log.warning("robot cap reached; not following robot %s (%s)", robot, topic.name)
+        if publisher.ignored:
+            with self._lock:
+                publisher.pending.clear()
+            return
+        if topic.kind == AGGREGATED and self._config.prefer_aggregated and robot not in self._aggregated:
+            self._aggregated.add(robot)
+            self._ignore_raw(robot)
+        feed = f"{topic.name}@{publisher.gid.hex()}"
+        ingest = PayloadIngest(self._model, robot, TRANSPORT, topic.name, cdr.WIRE_FORMAT, feed)
+        while True:  # what arrived meanwhile, in order, before new messages go straight to the ingest
+            with self._lock:
+                pending, publisher.pending = publisher.pending, []
+                if not pending:
+                    publisher.ingest = ingest
+                    break
+            for payload in pending:
+                _ingest(ingest, payload, topic.name)
+        log.info("following robot %s over ROS 2 (%s, publisher %s)", robot, topic.name, publisher.gid.hex())
+
+    def _ignore_raw(self, robot: str) -> None:
+        """Leave a robot's raw diagnostics publishers once it has an aggregator: forget what they said."""
+        for topic in self._topics.values():
+            if topic.kind != RAW:
+                continue
+            for publisher in topic.publishers.values():
+                if publisher.robot == robot and not publisher.ignored:
+                    publisher.ignored, publisher.ingest = True, None
+                    self._model.forget_topic(robot, topic.name)
+
+    def _publisher_left(self, topic: _Topic, publisher: _Publisher) -> None:
+        robot = publisher.robot
+        assert robot is not None
+        publishers = self._robot_publishers.get(robot, set())
+        publishers.discard((topic.name, publisher.gid))
+        if not publishers:
+            self._robot_publishers.pop(robot, None)
+            if self._shard.owns(robot):
+                self._model.publisher_left(robot)
+                log.info("robot %s: its last diagnostics publisher left the graph", robot)
+
+    def _take_loop(self) -> None:
+        taker = RawTaker()
+        try:
+            while True:
+                topic = self._arrived.get()
+                if topic is None:
+                    return
+                with self._taking:
+                    if topic.closed:
+                        continue
+                    address = topic.subscription.handle.pointer
+                    while (message := taker.take(address)) is not None:
+                        self._on_message(topic, message.payload, message.publisher_gid)
+        except Exception:  # the thread ends; the source says why
+            log.exception("taking ROS 2 messages failed")
+        finally:
+            taker.close()
+
+    def _on_message(self, topic: _Topic, payload: bytes, gid: bytes) -> None:
+        with self._lock:
+            publisher = topic.publishers.get(gid)
+            if publisher is None:  # a publisher the graph has not shown yet: the next discovery adopts it
+                publisher = topic.publishers[gid] = _Publisher(gid, None, time.monotonic())
+                topic.dirty = True
+            ingest = publisher.ingest
+            if ingest is None:
+                if not publisher.ignored:
+                    if len(publisher.pending) < MAX_PENDING_MESSAGES:
+                        publisher.pending.append(payload)
+                    else:
+                        publisher.pending[-1] = payload  # the newest says the most
                 return
-            if kind == AGGREGATED and sibling in self._feeds:
-                self._unfollow(sibling)
-                self._model.forget_topic(robot, sibling)
-        if not self._model.register(robot, TRANSPORT):
-            self._ignored.add(topic)
-            log.warning("robot cap reached; not following %s", topic)
-            return
-        self._subscribe(topic, robot, self._publishers_reliable(topic))
-        log.info("following robot %s over ROS 2 (%s)", robot, topic)
+        _ingest(ingest, payload, topic.name)
 
-    def _publishers_reliable(self, topic: str) -> bool:
-        assert self._ros is not None
-        node = self._ros.node
-        publishers = [
-            info for info in node.get_publishers_info_by_topic(topic) if info.node_name != node.get_name()
-        ]
-        return bool(publishers) and all(
-            info.qos_profile.reliability == ReliabilityPolicy.RELIABLE for info in publishers
-        )
 
-    def _subscribe(self, topic: str, robot: str, reliable: bool) -> None:
-        assert self._ros is not None
-        previous = self._feeds.get(topic)
-        ingest = previous.ingest if previous is not None else None
-        if ingest is None:
-            ingest = PayloadIngest(self._model, robot, TRANSPORT, topic, cdr.WIRE_FORMAT)
-
-        def on_payload(payload: bytes) -> None:
-            try:
-                ingest(payload)
-            except DecodeError as error:  # counted by the ingest
-                log.debug("undecodable message on %s: %s", topic, error)
-
-        events = SubscriptionEventCallbacks(
-            matched=lambda status: self._on_matched(topic, status.current_count),  # type: ignore[attr-defined]
-            incompatible_qos=lambda _: self._on_incompatible_qos(topic),
-            use_default_callbacks=False,
-        )
-        subscription = self._ros.node.create_subscription(
-            DiagnosticArray, topic, on_payload, subscription_qos(reliable), raw=True, event_callbacks=events
-        )
-        self._feeds[topic] = _Feed(robot, subscription, reliable, 0, ingest)
-        self._robot_topics.setdefault(robot, set()).add(topic)
-
-    def _unfollow(self, topic: str) -> None:
-        assert self._ros is not None
-        feed = self._feeds.pop(topic)
-        self._robot_topics[feed.robot].discard(topic)
-        self._ros.node.destroy_subscription(feed.subscription)
-
-    def _on_incompatible_qos(self, topic: str) -> None:
-        feed = self._feeds.get(topic)
-        if feed is None or not feed.reliable:
-            return
-        log.info("reading %s best-effort, as a publisher of it is", topic)
-        self._unfollow(topic)
-        self._subscribe(topic, feed.robot, reliable=False)
-
-    def _on_matched(self, topic: str, publishers: int) -> None:
-        feed = self._feeds.get(topic)
-        if feed is None:
-            return
-        feed.publishers = publishers
-        topics = self._robot_topics.get(feed.robot, ())
-        alive = any(self._feeds[other].publishers > 0 for other in topics if other in self._feeds)
-        self._model.set_publisher_alive(feed.robot, alive)
+def _ingest(ingest: PayloadIngest, payload: bytes, topic: str) -> None:
+    try:
+        ingest(payload)
+    except DecodeError as error:  # counted by the ingest
+        log.debug("undecodable message on %s: %s", topic, error)
 
 
 def node_name(config: Ros2Config, worker: int, workers: int) -> str:

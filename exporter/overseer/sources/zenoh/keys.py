@@ -7,12 +7,18 @@ every name has its `/` written as `%`. zenoh-bridge-ros2dds routes DDS topic `/<
 key `<ns>/diagnostics_agg`, with no type and no hash, and declares, while a node on the robot publishes
 it, the token `@/<bridge zid>/@ros2_lv/MP/<ns>§diagnostics_agg/diagnostic_msgs§msg§DiagnosticArray/<qos>`.
 Both carry the DDS CDR sample with its encapsulation header.
+
+rmw_zenoh's publisher GID is the XXH3-128 hash of the publisher's liveliness token, and each sample's
+attachment carries its publisher's GID: so a sample on the un-namespaced `/diagnostics`, which every
+diagnostic_updater node publishes on, tells whose node (whose namespace) sent it.
 """
 
 from __future__ import annotations
 
 import re
 from typing import NamedTuple
+
+import xxhash
 
 from overseer.sources.topic_names import AGGREGATED, RAW
 
@@ -83,6 +89,49 @@ def parse_data_key(key: str, domain: int) -> DiagnosticsKey:
     if chunks[-2] != DIAGNOSTIC_ARRAY_TYPE:
         raise RejectedKey("unexpected_type")
     return DiagnosticsKey(_namespace(chunks[1:-3]), chunks[-3], RMW_ZENOH, chunks[-1])
+
+
+class PublisherToken(NamedTuple):
+    """An rmw_zenoh diagnostics publisher, as its liveliness token announces it."""
+
+    topic: DiagnosticsKey
+    node_namespace: str  # '/robot_a', or '/' for none
+    node_name: str
+    gid: bytes
+
+
+def parse_publisher(key: str, domain: int) -> PublisherToken | None:
+    """The diagnostics publisher an rmw_zenoh liveliness token announces; None for any other token."""
+    topic = parse_publisher_token(key, domain)
+    if topic is None:
+        return None
+    chunks = key.split("/")
+    return PublisherToken(topic, chunks[7].replace("%", "/"), chunks[8], publisher_gid(key))
+
+
+def publisher_gid(token: str) -> bytes:
+    """rmw_zenoh's GID of the entity a liveliness token announces: XXH3-128 of the token, low half first."""
+    return xxhash.xxh3_128(token.encode()).intdigest().to_bytes(16, "little")
+
+
+ATTACHMENT_SIZE = 33  # rmw_zenoh (Jazzy): sequence number, source timestamp (int64), GID (length 16, bytes)
+_GID_SIZE = 16
+_NAMED_GID = b"\x0asource_gid"  # the earlier attachment named its fields
+
+
+def attachment_gid(attachment: bytes | None) -> bytes | None:
+    """The publisher GID an rmw_zenoh sample's attachment carries, or None (none, or not understood)."""
+    if attachment is None:
+        return None
+    if len(attachment) == ATTACHMENT_SIZE and attachment[16] == _GID_SIZE:
+        return attachment[17:]
+    at = attachment.rfind(_NAMED_GID)
+    if at < 0:
+        return None
+    rest = attachment[at + len(_NAMED_GID) :]
+    if len(rest) == _GID_SIZE + 1 and rest[0] == _GID_SIZE:
+        return rest[1:]
+    return rest if len(rest) == _GID_SIZE else None
 
 
 def parse_publisher_token(key: str, domain: int) -> DiagnosticsKey | None:

@@ -6,22 +6,32 @@ the message (another type hash), are heard with no restart. Payloads are DDS CDR
 same ingest as DDS samples. rmw_zenoh's liveliness tokens tell when a robot's diagnostics publisher
 goes (process killed, link lost), and so do zenoh-bridge-ros2dds's tokens for the routes it serves:
 the robot is down at once, not after `robot_timeout`.
+
+A sample of an un-namespaced topic (diagnostic_updater publishes on `/diagnostics` whatever its node's
+namespace) belongs to the robot its publisher's node names: the sample's attachment carries the
+publisher's GID, and the publisher's liveliness token, whose hash that GID is, its node's namespace
+(`robot_naming.py`). Each publisher is a feed of its robot.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
+import time
+from dataclasses import dataclass, field
 from typing import Any
 
 import zenoh
 from zenoh.handlers import FifoChannel
 
 from overseer.codec import DecodeError, cdr
+from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.zenoh import ZenohConfig
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh.keys import (
     BRIDGE,
@@ -29,12 +39,13 @@ from overseer.sources.zenoh.keys import (
     RMW_ZENOH,
     DiagnosticsKey,
     RejectedKey,
+    attachment_gid,
     bridge_liveliness_subscription,
     data_subscriptions,
     liveliness_subscription,
     parse_bridge_token,
     parse_data_key,
-    parse_publisher_token,
+    parse_publisher,
 )
 from overseer.sources.zenoh.session import session_config
 
@@ -43,10 +54,23 @@ log = logging.getLogger(__name__)
 TRANSPORT = "zenoh"
 RETRY_MIN_SECONDS = 0.5
 RETRY_MAX_SECONDS = 10.0
+TICK_SECONDS = 0.5  # how often publishers waiting for their token are looked at
 PRUNE_INTERVAL_SECONDS = 60.0
+ATTRIBUTION_GRACE_SECONDS = 3.0  # a publisher with no token by then (another rmw, a bridge): the domain's
 MAX_TOKENS_PER_ROBOT = 64
+MAX_PENDING_PUBLISHERS = 10_000
+MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
 MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
 CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
+
+
+@dataclass
+class _Unattributed:
+    """Samples of an un-namespaced topic from a publisher whose token has not arrived yet."""
+
+    parsed: DiagnosticsKey
+    seen_at: float
+    samples: list[bytes] = field(default_factory=list)
 
 
 class ZenohSource:
@@ -54,19 +78,29 @@ class ZenohSource:
 
     transport = TRANSPORT
 
-    def __init__(self, config: ZenohConfig, model: FleetModel, shard: Shard | None = None) -> None:
+    def __init__(
+        self,
+        config: ZenohConfig,
+        model: FleetModel,
+        shard: Shard | None = None,
+        namespace_depth: int = DEFAULT_NAMESPACE_DEPTH,
+    ) -> None:
         """Feed `model` from the Zenoh network in `config`; ConfigError at once if it is unusable."""
         self._config = config
         self._native = session_config(config)
         self._model = model
         self._shard = shard or Shard()
+        self._naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
         # Every ingest worker has a session and hears every key: what all of them see, the first counts.
         self._counts_shared_errors = self._shard.worker == 0
         self._lock = threading.Lock()
-        self._ingests: dict[tuple[str, str], PayloadIngest] = {}  # (robot, kind) → its topic's ingest
+        # (robot, kind, publisher GID or b"") → its feed's ingest, None when not followed
+        self._ingests: dict[tuple[str, str, bytes], PayloadIngest | None] = {}
         # Every worker hears every robot's key: the others' are known by key, so they cost a set lookup.
         self._foreign: set[str] = set()
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
+        self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
+        self._unattributed: dict[bytes, _Unattributed] = {}
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
         self._stop = threading.Event()
@@ -118,8 +152,12 @@ class ZenohSource:
             session.close()  # type: ignore[no-untyped-call]
             return
         log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
-        while not self._stop.wait(PRUNE_INTERVAL_SECONDS):
-            self._prune()
+        pruned = time.monotonic()
+        while not self._stop.wait(TICK_SECONDS):
+            self._attribute_late()
+            if time.monotonic() - pruned >= PRUNE_INTERVAL_SECONDS:
+                pruned = time.monotonic()
+                self._prune()
 
     def _open(self) -> zenoh.Session | None:
         delay = RETRY_MIN_SECONDS
@@ -155,50 +193,117 @@ class ZenohSource:
                     self._model.count_source_error(TRANSPORT, str(rejected))
                 log.debug("ignoring Zenoh key %r: %s", key, rejected)
                 return
-            robot = parsed.namespace or self._config.unnamespaced_robot
-            if not self._shard.owns(robot):
+            robot = self._naming.of_topic(parsed.namespace)
+            if robot is not None and not self._shard.owns(robot):
                 if len(self._foreign) < MAX_FOREIGN_KEYS:
                     self._foreign.add(key)
                 return
             if parsed.key_format == RMW_ZENOH and parsed.type_hash != DIAGNOSTIC_ARRAY_HASH:
                 # Another revision of the message: read anyway (the codec checks every byte), but say so.
                 self._model.count_source_error(TRANSPORT, "type_hash_mismatch")
-            ingest = self._ingest_for(robot, parsed)
+            attachment = sample.attachment
+            gid = attachment_gid(None if attachment is None else attachment.to_bytes()) or b""
+            payload = sample.payload.to_bytes()
+            if robot is None:
+                robot = self._publishers.get(gid) if gid else self._naming.unnamespaced_robot
+                if robot is None:
+                    self._hold(gid, parsed, payload)
+                    return
+                if not self._shard.owns(robot):
+                    return
+            ingest = self._ingest_for(robot, parsed, gid)
             if ingest is not None:
-                ingest(sample.payload.to_bytes())
+                ingest(payload)
         except DecodeError as error:  # already counted by the ingest
             log.debug("undecodable sample on %s: %s", sample.key_expr, error)
         except Exception:  # a callback from Zenoh's threads must never raise
             log.exception("failed to process diagnostics from %s", sample.key_expr)
 
-    def _ingest_for(self, robot: str, parsed: DiagnosticsKey) -> PayloadIngest | None:
-        """The ingest of the robot's topic; None when it is not followed (raw beside aggregated, cap)."""
+    def _hold(self, gid: bytes, parsed: DiagnosticsKey, payload: bytes) -> None:
+        """Keep a sample of a publisher whose token (whose node) is not known yet."""
         with self._lock:
-            ingest = self._ingests.get((robot, parsed.kind))
-            if ingest is not None:
-                return ingest
-            if parsed.kind == RAW and (robot, AGGREGATED) in self._ingests:
-                return None  # a robot publishing both is read from diagnostics_agg only
+            waiting = self._unattributed.get(gid)
+            if waiting is None:
+                if len(self._unattributed) >= MAX_PENDING_PUBLISHERS:
+                    return
+                waiting = self._unattributed[gid] = _Unattributed(parsed, time.monotonic())
+            if len(waiting.samples) < MAX_PENDING_SAMPLES:
+                waiting.samples.append(payload)
+            else:
+                waiting.samples[-1] = payload  # the newest says the most
+
+    def _release(self, gid: bytes, robot: str) -> None:
+        """Hand a publisher's held samples to its robot, now that its robot is known."""
+        with self._lock:
+            waiting = self._unattributed.pop(gid, None)
+        if waiting is None or not self._shard.owns(robot):
+            return
+        ingest = self._ingest_for(robot, waiting.parsed, gid)
+        if ingest is None:
+            return
+        for payload in waiting.samples:
+            with contextlib.suppress(DecodeError):  # counted by the ingest
+                ingest(payload)
+
+    def _attribute_late(self) -> None:
+        """Publishers heard with no token within the grace belong to the domain's robot."""
+        now = time.monotonic()
+        waiting = list(self._unattributed.items())
+        late = [gid for gid, held in waiting if now - held.seen_at >= ATTRIBUTION_GRACE_SECONDS]
+        for gid in late:
+            with self._lock:
+                self._publishers.setdefault(gid, self._naming.unnamespaced_robot)
+            self._release(gid, self._naming.unnamespaced_robot)
+
+    def _ingest_for(self, robot: str, parsed: DiagnosticsKey, gid: bytes) -> PayloadIngest | None:
+        """The ingest of a publisher's feed; None when it is not followed (raw beside aggregated, cap)."""
+        feed = (robot, parsed.kind, gid)
+        ingest = self._ingests.get(feed)
+        if ingest is not None or feed in self._ingests:
+            return ingest
+        with self._lock:
+            if feed in self._ingests:
+                return self._ingests[feed]
+            if parsed.kind == RAW and any(key[:2] == (robot, AGGREGATED) for key in self._ingests):
+                self._ingests[feed] = None  # a robot publishing both is read from diagnostics_agg only
+                return None
             if not self._model.register(robot, TRANSPORT):
                 self._model.count_message(TRANSPORT, "dropped")
                 return None
-            if parsed.kind == AGGREGATED and self._ingests.pop((robot, RAW), None) is not None:
-                self._model.forget_topic(robot, parsed.topic[: -len(AGGREGATED)] + RAW)
-            ingest = PayloadIngest(self._model, robot, TRANSPORT, parsed.topic, cdr.WIRE_FORMAT)
-            self._ingests[(robot, parsed.kind)] = ingest
+            if parsed.kind == AGGREGATED:
+                for key in [key for key in self._ingests if key[:2] == (robot, RAW)]:
+                    self._ingests[key] = None
+                    self._model.forget_topic(robot, parsed.topic[: -len(AGGREGATED)] + RAW)
+            name = f"{parsed.topic}@{gid.hex()}" if gid else parsed.topic
+            ingest = PayloadIngest(self._model, robot, TRANSPORT, parsed.topic, cdr.WIRE_FORMAT, name)
+            self._ingests[feed] = ingest
             log.info("following robot %s over Zenoh (%s, %s)", robot, parsed.topic, parsed.key_format)
             return ingest
 
     def _on_token(self, sample: zenoh.Sample) -> None:
         try:
             key = str(sample.key_expr)
-            parsed = parse_publisher_token(key, self._config.domain) or parse_bridge_token(key)
-            if parsed is None:
-                return
-            robot = parsed.namespace or self._config.unnamespaced_robot
-            if not self._shard.owns(robot):
+            publisher = parse_publisher(key, self._config.domain)
+            gid = b""
+            if publisher is not None:
+                parsed, gid = publisher.topic, publisher.gid
+                robot = self._naming.of_topic(parsed.namespace)
+                robot = robot if robot is not None else self._naming.of_node(publisher.node_namespace)
+            else:
+                bridged = parse_bridge_token(key)
+                if bridged is None:
+                    return
+                robot = bridged.namespace or self._config.unnamespaced_robot
+            if robot is None:
+                self._model.count_source_error(TRANSPORT, "invalid_namespace")
                 return
             alive = sample.kind == zenoh.SampleKind.PUT
+            if gid and alive:
+                with self._lock:
+                    self._publishers[gid] = robot
+                self._release(gid, robot)
+            if not self._shard.owns(robot):
+                return
             with self._lock:
                 tokens = self._tokens.get(robot)
                 if alive:
@@ -211,18 +316,21 @@ class ZenohSource:
                     tokens.discard(key)
                     if not tokens:
                         del self._tokens[robot]
+                        self._model.publisher_left(robot)
                 else:
                     return
-                self._model.set_publisher_alive(robot, robot in self._tokens)
             log.info("diagnostics publisher of %s %s", robot, "appeared" if alive else "went away")
         except Exception:  # a callback from Zenoh's threads must never raise
             log.exception("failed to process liveliness token %s", sample.key_expr)
 
     def _prune(self) -> None:
-        """Forget the ingests and tokens of robots the model has forgotten (expired)."""
+        """Forget the ingests, tokens and publishers of robots the model has forgotten (expired)."""
         known = {robot.name for robot in self._model.snapshot().robots}
         with self._lock:
             for key in [key for key in self._ingests if key[0] not in known]:
                 del self._ingests[key]
             for robot in [robot for robot in self._tokens if robot not in known]:
                 del self._tokens[robot]
+            owns = self._shard.owns
+            for gid in [gid for gid, robot in self._publishers.items() if robot not in known and owns(robot)]:
+                del self._publishers[gid]
