@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -153,19 +154,31 @@ class Exporter:
         if self.ros2_fleet is not None:
             self.ros2_fleet.start()
 
-    def stop(self) -> None:
-        """Stop serving and leave the transports."""
+    def stop(self) -> bool:
+        """Stop everything in order; False when a part failed to stop (the others are stopped all the same).
+
+        The order: no worker is restarted, the HTTP server stops answering, the pushes end, the maintenance
+        schedule closes, the fleet leaves its transports (and its workers end), and the event history
+        writes what is queued and closes the database last (checkpointed: no write-ahead log is left).
+        """
+        steps: list[tuple[str, Callable[[], None]]] = []
         if isinstance(self.fleet, PooledFleet):
-            self.fleet.prepare_stop()
+            steps.append(("ingest workers", self.fleet.prepare_stop))
+        steps += [("HTTP server", self.server.shutdown), ("HTTP socket", self.server.server_close)]
         if self.icinga2_push is not None:
-            self.icinga2_push.stop()
+            steps.append(("Icinga 2 push", self.icinga2_push.stop))
         if self.silences is not None:
-            self.silences.stop()
+            steps.append(("Alertmanager silences", self.silences.stop))
         if self.ros2_fleet is not None:
-            self.ros2_fleet.stop()
-        self.server.shutdown()
-        self.server.server_close()
-        self.fleet.stop()
-        self.maintenance.stop()
+            steps.append(("ROS 2 fleet publisher", self.ros2_fleet.stop))
+        steps += [("maintenance schedule", self.maintenance.stop), ("fleet", self.fleet.stop)]
         if self.history is not None:
-            self.history.stop()
+            steps.append(("event history", self.history.stop))
+        clean = True
+        for what, step in steps:
+            try:
+                step()
+            except Exception:  # the rest must still stop: the database above all
+                log.exception("stopping the %s failed", what)
+                clean = False
+        return clean

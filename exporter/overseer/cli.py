@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import re
 import signal
 import sys
@@ -442,11 +443,24 @@ def _zenoh_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _wait_for_signal() -> None:
+    """Return at SIGTERM or SIGINT; from then on a second one ends the process at once."""
     stop = threading.Event()
+
+    def first(signum: int, _frame: object) -> None:
+        stop.set()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, again)
+
+    def again(signum: int, _frame: object) -> None:
+        log.warning("%s again while stopping: leaving at once", signal.Signals(signum).name)
+        logging.shutdown()
+        os._exit(128 + signum)
+
     for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, first)
     while not stop.wait(1.0):
         pass
+    log.info("stopping")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -468,7 +482,9 @@ def _run(args: argparse.Namespace) -> int:
         print(f"overseer run: {error}", file=sys.stderr)
         return 1
     _wait_for_signal()
-    exporter.stop()
+    if not exporter.stop():
+        return 1
+    log.info("stopped")
     return 0
 
 

@@ -166,6 +166,8 @@ class EventStore:
         self.flush()
         with self._write_lock:
             if self._writer is not None:
+                with contextlib.suppress(sqlite3.Error):  # a busy reader: SQLite checkpoints at close anyway
+                    self._writer.execute("PRAGMA wal_checkpoint(TRUNCATE)")
                 self._writer.close()
                 self._writer = None
         with self._read_lock:
