@@ -1,8 +1,9 @@
 """The fleet simulator over Zenoh: each virtual robot publishes as rmw_zenoh does, or as the bridge does.
 
 As rmw_zenoh (ROS 2 Jazzy): `<domain>/<ns>/diagnostics_agg/diagnostic_msgs::msg::dds_::DiagnosticArray_/
-RIHS01_…`, with the attachment rmw_zenoh sends (sequence number, source timestamp, source GID, in
-zenoh-ext serialization) and the liveliness tokens of the node and of the publisher. As
+RIHS01_…`, with the attachment rmw_zenoh sends (sequence number and source timestamp as int64, then the
+publisher's GID, the XXH3-128 hash of its liveliness token, as a sequence of 16 bytes, in zenoh-ext
+serialization) and the liveliness tokens of the node and of the publisher. As
 zenoh-bridge-ros2dds: `<ns>/diagnostics_agg`, no attachment, and the bridge's token for the route.
 The payload is the same CDR sample the DDS simulator writes; the fleet's design, events and timing
 are shared with it.
@@ -14,7 +15,6 @@ import json
 import struct
 import time
 from dataclasses import dataclass, field
-from hashlib import blake2b
 
 import zenoh
 
@@ -25,6 +25,7 @@ from overseer.sources.zenoh.keys import (
     bridge_publisher_token,
     data_key,
     node_token,
+    publisher_gid,
     publisher_token,
 )
 
@@ -55,23 +56,15 @@ class _Writer:
 
 
 def attachment(sequence_number: int, source_timestamp: int, source_gid: bytes) -> bytes:
-    """rmw_zenoh's attachment: named int64 sequence number and timestamp, and the 16-byte GID."""
+    """rmw_zenoh's attachment (33 bytes): int64 sequence number and timestamp, and the 16-byte GID."""
     return b"".join(
         [
-            _text("sequence_number"),
             _I64.pack(sequence_number),
-            _text("source_timestamp"),
             _I64.pack(source_timestamp),
-            _text("source_gid"),
             bytes([len(source_gid)]),  # a sequence length (LEB128; one byte below 128)
             source_gid,
         ]
     )
-
-
-def _text(value: str) -> bytes:
-    encoded = value.encode()
-    return bytes([len(encoded)]) + encoded  # LEB128 length: one byte below 128
 
 
 class ZenohFleetSimulator(FleetSimulator):
@@ -153,7 +146,7 @@ class ZenohFleetSimulator(FleetSimulator):
                 liveliness.declare_token(node_token(robot.domain, self._zid, namespace, NODE_NAME))
             )
             writer.tokens.append(liveliness.declare_token(token))
-            writer.gid = blake2b(token.encode(), digest_size=16).digest()  # rmw_zenoh hashes its token too
+            writer.gid = publisher_gid(token)
         self._zenoh_writers[robot.name] = writer
 
     def _close_writer(self, robot: SimulatedRobot) -> None:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import xxhash
 import zenoh
 from zenoh.ext import Int64, UInt8, z_deserialize
 
@@ -245,13 +246,13 @@ def test_the_simulator_sends_rmw_zenoh_attachment_and_liveliness_tokens(tmp_path
     assert str(first.key_expr) == f"0/a/b1/diagnostics_agg/{DIAGNOSTIC_ARRAY_TYPE}/{DIAGNOSTIC_ARRAY_HASH}"
     assert first.payload.to_bytes()[:4] == b"\x00\x01\x00\x00"
     assert first.attachment is not None and second.attachment is not None
-    # Read back with Zenoh's own deserializer, as rmw_zenoh does.
-    layout: Any = tuple[str, Int64, str, Int64, str, list[UInt8]]
+    # Read back with Zenoh's own deserializer, as rmw_zenoh does: 33 bytes, the GID the token's hash.
+    layout: Any = tuple[Int64, Int64, list[UInt8]]
     fields: tuple[Any, ...] = z_deserialize(layout, first.attachment)
-    name1, sequence1, name2, stamp, name3, gid = fields
-    assert (name1, name2, name3) == ("sequence_number", "source_timestamp", "source_gid")
+    sequence1, stamp, gid = fields
+    assert len(first.attachment.to_bytes()) == 33
     assert len(gid) == 16 and abs(stamp / 1e9 - time.time()) < 60
-    assert z_deserialize(layout, second.attachment)[1] == sequence1 + 1
+    assert z_deserialize(layout, second.attachment)[0] == sequence1 + 1
     publisher = next(t for t in tokens if "/MP/" in t)
     chunks = publisher.split("/")
     assert chunks[5:] == [
@@ -265,6 +266,8 @@ def test_the_simulator_sends_rmw_zenoh_attachment_and_liveliness_tokens(tmp_path
         "::,:,:,:,,",
     ]
     assert any(t.endswith("/NN/%/%a%b1/diagnostic_aggregator") for t in tokens)
+    # rmw_zenoh's GID of an entity: XXH3-128 of its liveliness token, low half first (little-endian)
+    assert bytes(gid) == xxhash.xxh3_128(publisher.encode()).intdigest().to_bytes(16, "little")
 
 
 def test_the_shard_and_the_robot_cap_hold_over_zenoh(tmp_path: Path) -> None:

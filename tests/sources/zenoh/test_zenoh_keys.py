@@ -9,6 +9,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from overseer.config import ConfigError, load_config
 from overseer.config.zenoh import ZenohConfig
+from overseer.simulator.zenoh_publisher import attachment
 from overseer.sources.zenoh.keys import (
     BRIDGE,
     DIAGNOSTIC_ARRAY_HASH,
@@ -16,12 +17,15 @@ from overseer.sources.zenoh.keys import (
     RMW_ZENOH,
     DiagnosticsKey,
     RejectedKey,
+    attachment_gid,
     bridge_key,
     bridge_publisher_token,
     data_key,
     parse_bridge_token,
     parse_data_key,
+    parse_publisher,
     parse_publisher_token,
+    publisher_gid,
     publisher_token,
 )
 from overseer.sources.zenoh.session import session_config
@@ -155,3 +159,38 @@ def test_a_native_file_zenoh_cannot_read_is_refused_naming_the_key(tmp_path: Pat
     native.write_text("{mode: ")
     with pytest.raises(ConfigError, match=r"zenoh\.config: .* is not a usable Zenoh configuration"):
         session_config(load_config(None, {"zenoh.config": str(native)}).zenoh)
+
+
+def test_a_publisher_token_names_its_node_and_its_gid_is_the_tokens_hash() -> None:
+    token = publisher_token(0, "a1b2", 7, "robot_a/drivers", "lidar", "diagnostics", DIAGNOSTIC_ARRAY_HASH)
+    publisher = parse_publisher(token, 0)
+    assert publisher is not None
+    assert (publisher.node_namespace, publisher.node_name) == ("/robot_a/drivers", "lidar")
+    assert publisher.topic.namespace == "robot_a/drivers" and publisher.topic.kind == "diagnostics"
+    # rmw_zenoh: memcpy of XXH3-128's low then high 64 bits, on a little-endian host
+    assert publisher.gid == publisher_gid(token) and len(publisher.gid) == 16
+    assert publisher.gid != publisher_gid(token.replace("lidar", "camera"))
+    assert parse_publisher(token, 1) is None
+
+
+@pytest.mark.parametrize(
+    ("raw", "expected"),
+    [
+        (attachment(1, 1_700_000_000_000_000_000, bytes(range(16))), bytes(range(16))),  # Jazzy: 33 bytes
+        (  # an earlier rmw_zenoh named its fields
+            b"\x0fsequence_number"
+            + bytes(8)
+            + b"\x10source_timestamp"
+            + bytes(8)
+            + b"\x0asource_gid\x10"
+            + bytes(range(16)),
+            bytes(range(16)),
+        ),
+        (None, None),
+        (b"", None),
+        (bytes(33), None),  # no GID length where it belongs
+        (b"\x0asource_gid" + bytes(5), None),
+    ],
+)
+def test_the_attachment_gives_its_publishers_gid(raw: bytes | None, expected: bytes | None) -> None:
+    assert attachment_gid(raw) == expected
