@@ -25,6 +25,7 @@ from testbed.paths import TESTBED
 from testbed.processes import RunningProcess, spawn
 
 ROBOT_SCRIPT = TESTBED / "ros2" / "robot.py"
+UPDATER_SCRIPT = TESTBED / "ros2" / "updater_robot.py"  # a node that reports as diagnostic_updater does
 
 
 def ros2_environment(domain: int) -> dict[str, str]:
@@ -32,11 +33,13 @@ def ros2_environment(domain: int) -> dict[str, str]:
     return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 
 
-def start_robot(tmp_path: Path, domain: int, *args: str, timeout: float = 30.0) -> RunningProcess:
-    """Start a Jazzy robot (`testbed/ros2/robot.py` with `args`) and wait until it publishes."""
+def start_robot(
+    tmp_path: Path, domain: int, *args: str, timeout: float = 30.0, script: Path = ROBOT_SCRIPT
+) -> RunningProcess:
+    """Start a Jazzy robot (`script`, default `testbed/ros2/robot.py`, with `args`) until it publishes."""
     log_path = tmp_path / f"ros2-robot-{time.monotonic_ns()}.log"
     robot = RunningProcess(
-        spawn([sys.executable, str(ROBOT_SCRIPT), *args], log_path, env=ros2_environment(domain)), log_path
+        spawn([sys.executable, str(script), *args], log_path, env=ros2_environment(domain)), log_path
     )
     deadline = time.monotonic() + timeout
     while "ready" not in robot.log():
@@ -50,12 +53,14 @@ def start_robot(tmp_path: Path, domain: int, *args: str, timeout: float = 30.0) 
 
 
 @contextmanager
-def running_robots(tmp_path: Path, domain: int, *robots: tuple[str, ...]) -> Iterator[list[RunningProcess]]:
+def running_robots(
+    tmp_path: Path, domain: int, *robots: tuple[str, ...], script: Path = ROBOT_SCRIPT
+) -> Iterator[list[RunningProcess]]:
     """Jazzy robots, one per argument tuple, until the block ends (stopped cleanly then)."""
     started: list[RunningProcess] = []
     try:
         for args in robots:
-            started.append(start_robot(tmp_path, domain, *args))
+            started.append(start_robot(tmp_path, domain, *args, script=script))
         yield started
     finally:
         for robot in started:

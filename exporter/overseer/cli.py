@@ -178,6 +178,14 @@ def _add_exporter_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fleet.stale-after", dest="stale_after", metavar="DURATION")
     parser.add_argument("--fleet.robot-timeout", dest="robot_timeout", metavar="DURATION")
     parser.add_argument("--fleet.expire-after", dest="expire_after", metavar="DURATION")
+    parser.add_argument(
+        "--fleet.robot-namespace-depth",
+        dest="robot_namespace_depth",
+        type=int,
+        metavar="N",
+        help="leading segments of a node's namespace that name its robot, for un-namespaced topics "
+        "(default 1: /robot_a/drivers is robot_a; 0: the whole namespace)",
+    )
     parser.add_argument("--log.level", dest="log_level", choices=["debug", "info", "warning", "error"])
     parser.add_argument(
         "--log.format", dest="log_format", choices=["text", "json"], help="log lines as text or JSON"
@@ -387,6 +395,8 @@ def _exporter_overrides(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, name)
         if value is not None:
             overrides[f"fleet.{name}"] = parse_duration(value, f"--fleet.{name.replace('_', '-')}")
+    if args.robot_namespace_depth is not None:
+        overrides["fleet.robot_namespace_depth"] = args.robot_namespace_depth
     if args.dds_disabled:
         overrides["dds.enabled"] = False
     overrides.update(_zenoh_overrides(args))

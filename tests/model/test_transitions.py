@@ -346,3 +346,36 @@ def test_a_publisher_that_left_is_a_robot_down_at_the_check_not_after_the_timeou
     fleet.check()
     [up] = fleet.take()
     assert (up.kind, up.time) == ("robot_up", back) and down.time < up.time
+
+
+def test_a_robot_up_and_down_between_two_checks_is_both_events_at_their_times() -> None:
+    fleet = Fleet()
+    fleet.check()
+    fleet.publish("r1", (0, "/a", "fine"))
+    first = fleet.clock.now
+    fleet.advance(0.3)
+    fleet.model.publisher_left("r1")  # a node that came and went within a second
+    left = fleet.clock.now
+    fleet.advance(0.5)
+    fleet.check()
+    assert [(e.kind, e.time) for e in fleet.take() if e.kind != "appeared"] == [
+        ("robot_up", first),
+        ("robot_down", left),
+    ]
+    fleet.advance(2)
+    fleet.publish("r1", (0, "/a", "fine"))  # back: up again
+    back = fleet.clock.now
+    fleet.check()
+    fleet.advance(0.2)
+    fleet.model.publisher_left("r1")
+    gone = fleet.clock.now
+    fleet.advance(0.2)
+    fleet.publish("r1", (0, "/a", "fine"))  # a restart between two checks: down and up again
+    again = fleet.clock.now
+    fleet.advance(0.5)
+    fleet.check()
+    assert [(e.kind, e.time) for e in fleet.take()] == [
+        ("robot_up", back),
+        ("robot_down", gone),
+        ("robot_up", again),
+    ]

@@ -23,7 +23,7 @@ from overseer.levels import Level, worst
 from overseer.model.events import Event, EventSink
 from overseer.model.fleet import LevelChange
 from overseer.model.snapshot import FleetSnapshot, RobotTiming
-from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState
+from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState, robot_timeout
 
 
 @dataclass(slots=True)
@@ -37,6 +37,8 @@ class _Seen:
 
     heard: bool
     up: bool
+    up_since: float  # the robot's run of messages at the last check (it starts anew after being down)
+    last_message: float  # the robot's last message at the last check
     revision: int
     timing: RobotTiming | None
     stale: dict[ComponentKey, tuple[Level, str]]  # STALE while their robot is up: level, hardware_id
@@ -79,12 +81,16 @@ class TransitionDetector:
             before = seen.get(robot.name)
             up = robot_up(robot)
             if before is None:
-                before = seen[robot.name] = _Seen(False, False, -1, None, {})
+                before = seen[robot.name] = _Seen(False, False, -1.0, 0.0, -1, None, {})
             if before.revision != robot.revision or before.timing is None:
                 before.timing = snapshot.timing(robot)
                 before.revision = robot.revision
-            if up is before.up and not before.stale and not any(snapshot.staleness(robot, before.timing)):
-                before.heard = before.heard or robot.last_message is not None
+            if (
+                up is before.up
+                and robot.up_since == before.up_since
+                and not before.stale
+                and not any(snapshot.staleness(robot, before.timing))
+            ):
                 continue  # the common case: a robot up (or down) as before, every component fresh
             self._robot_transitions(snapshot, robot, before, up, events)
         if len(seen) > len(snapshot.robots):
@@ -106,36 +112,56 @@ class TransitionDetector:
     def _robot_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, up: bool, events: list[Event]
     ) -> None:
-        name = robot.name
-        if before.up and not up:
-            left = not robot.publisher_alive  # the transport saw its publisher go: down then, not later
+        """A robot's downs and ups since the last check, each at its time.
+
+        A new run of messages (`up_since` moved) means the robot was down in between, even when both
+        happened between two checks: a run that began and ended since then is an up and a down.
+        """
+        new_run = robot.last_message is not None and robot.up_since != before.up_since
+        left_at = robot.left_at
+        if before.up and new_run:  # down and back between two checks
+            if left_at is not None and left_at <= robot.up_since:
+                events.append(self._down(robot, robot.wall_time(left_at), True))
+            else:  # silent since about the last check
+                silent_until = before.last_message + robot_timeout(self._limits, robot)
+                events.append(self._down(robot, robot.wall_time(min(silent_until, robot.up_since)), False))
+        elif before.up and not up:
             events.append(
-                Event(
-                    robot.wall_time(snapshot.went_down_at(robot)),
-                    name,
-                    "robot_down",
-                    old_level=_reported_worst(robot.components),  # unchanged since it went silent
-                    new_level=Level.STALE,
-                    message="its diagnostics publisher left"
-                    if left
-                    else f"no diagnostics received for {snapshot.robot_timeout(robot):g} s",
-                )
+                self._down(robot, robot.wall_time(snapshot.went_down_at(robot)), not robot.publisher_alive)
             )
-        elif up and not before.up:
+        if new_run:
             events.append(
                 Event(
                     robot.wall_time(robot.up_since),
-                    name,
+                    robot.name,
                     "robot_up",
                     old_level=Level.STALE if before.heard else None,
-                    new_level=snapshot.robot_level(robot),
+                    new_level=snapshot.robot_level(robot) if up else _reported_worst(robot.components),
                     message="diagnostics received again" if before.heard else "first diagnostics received",
                 )
             )
+            if not up:  # its run ended already
+                down_at = robot.wall_time(snapshot.went_down_at(robot))
+                events.append(self._down(robot, down_at, not robot.publisher_alive))
         if up:
             self._component_transitions(snapshot, robot, before, events)
         before.heard = before.heard or robot.last_message is not None
         before.up = up
+        before.up_since = robot.up_since
+        before.last_message = robot.last_message or 0.0
+
+    def _down(self, robot: RobotState, at: float, left: bool) -> Event:
+        """`robot_down` at `at`, because its publisher left or because it fell silent."""
+        return Event(
+            at,
+            robot.name,
+            "robot_down",
+            old_level=_reported_worst(robot.components),  # unchanged since it went silent
+            new_level=Level.STALE,
+            message="its diagnostics publisher left"
+            if left
+            else f"no diagnostics received for {robot_timeout(self._limits, robot):g} s",
+        )
 
     def _component_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, events: list[Event]

@@ -193,11 +193,23 @@ def bridge_key(namespace: str, kind: str) -> str:
 
 
 def publisher_token(
-    domain: int, zid: str, entity_id: int, namespace: str, node: str, kind: str, type_hash: str
+    domain: int,
+    zid: str,
+    entity_id: int,
+    namespace: str,
+    node: str,
+    kind: str,
+    type_hash: str,
+    topic_namespace: str | None = None,
 ) -> str:
-    """The liveliness token rmw_zenoh declares for a publisher of `/<namespace>/<kind>` (default QoS)."""
+    """The liveliness token rmw_zenoh declares for a publisher of `/<namespace>/<kind>` (default QoS).
+
+    The topic's namespace is the node's, unless `topic_namespace` says otherwise: diagnostic_updater
+    publishes on the absolute `/diagnostics` (`topic_namespace=""`) from a node in any namespace.
+    """
     ns = _mangled("/" + namespace)
-    topic = _mangled(f"/{namespace}/{kind}" if namespace else f"/{kind}")
+    in_topic = namespace if topic_namespace is None else topic_namespace
+    topic = _mangled(f"/{in_topic}/{kind}" if in_topic else f"/{kind}")
     qos = "::,:,:,:,,"  # every policy at rmw_zenoh's default
     return (
         f"{LIVELINESS_SPACE}/{domain}/{zid}/0/{entity_id}/{PUBLISHER_ENTITY}/%/{ns}/{node}/{topic}/"
