@@ -38,6 +38,7 @@ PROGRAMS = [
     "/usr/sbin/nagios4",
     "/usr/bin/rosmaster",
     "/usr/bin/python3",  # Debian's, for ROS 1's rospy
+    "faketime",  # libfaketime, which steps a running exporter's wall clock
 ]
 
 

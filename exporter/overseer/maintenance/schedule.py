@@ -16,6 +16,7 @@ import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from overseer.clock import steady_time
 from overseer.config.maintenance import MaintenanceConfig
 from overseer.maintenance.store import StoreUnavailable, WindowStore
 from overseer.model.events import Event, EventKind, EventSink
@@ -52,9 +53,13 @@ class MaintenanceSchedule:
         config: MaintenanceConfig,
         store: WindowStore | None,
         events: EventSink | None = None,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] = steady_time,
     ) -> None:
-        """Windows of `config` and `store`; `events` receives each window's start and end."""
+        """Windows of `config` and `store`; `events` receives each window's start and end.
+
+        `clock` judges when windows start and end: by default a wall clock that a step of the system's
+        does not move (`overseer.clock`).
+        """
         self.config = config
         self.store = store
         self._events = events

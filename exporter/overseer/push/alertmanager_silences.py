@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from overseer.clock import steady_time
 from overseer.config.alertmanager import AlertmanagerConfig
 from overseer.maintenance.effects import CREATED, REMOVED, EffectStats
 from overseer.maintenance.schedule import MaintenanceSchedule
@@ -38,7 +39,7 @@ class AlertmanagerSilences:
         config: AlertmanagerConfig,
         schedule: MaintenanceSchedule,
         stats: EffectStats | None = None,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] = steady_time,
     ) -> None:
         """Silence in the Alertmanager of `config`; nothing is sent before `start`."""
         self._config = config
