@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import playwright
-from playwright.sync_api import Browser, Page, sync_playwright
+from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
 from playwright.sync_api import Error as PlaywrightError
 
 CHROMIUM_ARGS = [
@@ -83,12 +83,36 @@ def headless_chromium() -> Iterator[Browser]:
 
 
 class PageErrors:
-    """Uncaught exceptions of a page's scripts, collected so a test can assert there were none."""
+    """Uncaught exceptions of a page's scripts and errors on its console, for a test to assert none.
+
+    Console errors are what a browser says of a file it could not load (a 404) or a refused script.
+    """
 
     def __init__(self, page: Page) -> None:
         """Start collecting `page`'s errors."""
         self.errors: list[str] = []
+        self.expected_failures: list[str] = []  # URLs a test makes fail on purpose
         page.on("pageerror", lambda error: self.errors.append(str(error)))
+        page.on("console", self._on_console)
+        _collectors[id(page)] = self
+
+    def _on_console(self, message: ConsoleMessage) -> None:
+        if message.type != "error":
+            return
+        url = str(message.location.get("url", ""))
+        if message.text.startswith("Failed to load resource") and any(
+            part in url for part in self.expected_failures
+        ):
+            return  # the test made this request fail, and checks that the page says so
+        self.errors.append(f"console: {message.text} ({url})")
+
+
+_collectors: dict[int, PageErrors] = {}
+
+
+def expect_failed_request(page: Page, url_part: str) -> None:
+    """Let requests whose URL holds `url_part` fail without failing the page: the test makes them fail."""
+    _collectors[id(page)].expected_failures.append(url_part)
 
 
 @contextmanager
@@ -101,7 +125,8 @@ def error_free_page(browser: Browser, **context_options: Any) -> Iterator[Page]:
         yield page
     finally:
         context.close()
-    assert errors.errors == []
+        _collectors.pop(id(page), None)
+    assert errors.errors == [], errors.errors
 
 
 def open_page(page: Page, url: str, view: str = "fleet") -> None:

@@ -21,7 +21,7 @@ from testbed.paths import REPO
 from testbed.processes import running_exporter
 
 ROOT = REPO
-PAGE_SUFFIXES = {".html", ".js", ".css"}
+PAGE_SUFFIXES = {".html", ".js", ".css", ".svg"}
 COMPILERS = ["cc", "gcc", "c99", "x86_64-linux-gnu-gcc", "clang"]
 
 

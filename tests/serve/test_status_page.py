@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import threading
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,7 +20,7 @@ from playwright.sync_api import Browser, Page, expect
 
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from testbed.browser import error_free_page, open_page, wait_for_refresh
+from testbed.browser import error_free_page, expect_failed_request, open_page, wait_for_refresh
 from testbed.dds_writer import raw_diagnostics_writer
 from testbed.ports import fresh_domain_id
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
@@ -130,6 +131,26 @@ def test_fleet_view_shows_each_robot_colored_by_level_and_counts_per_level(
     expect(page.locator("#showing")).to_have_text("Showing 6 of 6 robots")
 
 
+def test_the_page_has_its_icon_and_the_icon_is_where_browsers_look_for_it_unasked(
+    page: Page, fleet: Exporter
+) -> None:
+    icons: list[tuple[str, int, str]] = []
+    page.on(
+        "response",
+        lambda response: (
+            icons.append((response.url, response.status, response.headers["content-type"]))
+            if "favicon" in response.url
+            else None
+        ),
+    )
+    open_page(page, fleet.url + "/")  # the page fails on any console error: a missing icon is one
+    expect(page.locator("link[rel=icon]")).to_have_attribute("href", "static/favicon.svg")
+    with urllib.request.urlopen(fleet.url + "/favicon.ico", timeout=5) as answer:
+        assert (answer.status, answer.headers["Content-Type"]) == (200, "image/svg+xml")
+        assert answer.read().startswith(b"<svg")
+    assert all(status == 200 and kind == "image/svg+xml" for _, status, kind in icons), icons
+
+
 def test_robots_are_grouped_by_namespace_prefix(page: Page, fleet: Exporter) -> None:
     open_page(page, fleet.url + "/")
     groups = page.locator("details.group").evaluate_all(
@@ -219,6 +240,7 @@ def test_drilling_into_a_robot_shows_its_component_tree_with_worst_levels_rolled
 
 
 def test_deep_links_open_the_filtered_fleet_and_a_robot_directly(page: Page, fleet: Exporter) -> None:
+    expect_failed_request(page, "/api/v1/robots/nobody")  # a link to a robot the exporter does not know
     open_page(page, fleet.url + "/?level=ERROR,WARN&q=laser&sort=level")
     expect(page.locator("#search")).to_have_value("laser")
     expect(page.locator("#sort")).to_have_value("level")
@@ -332,6 +354,7 @@ def test_timeline_says_no_history_when_the_exporter_has_none_faked_older_exporte
     page: Page, fleet: Exporter
 ) -> None:
     page.route("**/api/v1/events*", lambda route: route.fulfill(status=404, body='{"error": "no such path"}'))
+    expect_failed_request(page, "/api/v1/events")
     open_page(page, f"{fleet.url}/?robot=robot1", view="robot")
     expect(page.locator("#timeline-note")).to_have_text("no history: this exporter keeps no event history")
     assert page.locator("#timeline-events li").count() == 0
@@ -376,6 +399,7 @@ def test_timeline_shows_a_change_made_during_the_test(page: Page, tmp_path: Path
 
 
 def test_status_page_reports_an_exporter_that_went_away(page: Page, tmp_path: Path, dds_domain: int) -> None:
+    expect_failed_request(page, "/api/v1/")  # once it is gone
     with running_exporter(tmp_path, dds_domain, f"--events.path={tmp_path / 'events.db'}") as exporter:
         open_page(page, exporter.url + "/")
         expect(page.locator("#error")).to_have_text("")

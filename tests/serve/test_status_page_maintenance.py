@@ -17,7 +17,7 @@ import pytest
 from playwright.sync_api import Browser, Page, expect
 
 from overseer.app import Exporter
-from testbed.browser import error_free_page, open_page
+from testbed.browser import error_free_page, expect_failed_request, open_page
 from testbed.in_process import call, in_process_exporter, publish
 
 pytestmark = pytest.mark.servers
@@ -123,6 +123,7 @@ def test_a_writer_ends_a_robots_window_from_its_view_and_it_turns_red_again(
 
 
 def test_the_exporters_refusal_is_shown_where_the_user_typed(alice: Page, running: Exporter) -> None:
+    expect_failed_request(alice, "/api/v1/maintenance")  # the exporter refuses the window: a 400
     open_page(alice, running.server.url + "/")
     alice.fill("#maintenance-robots", "site_a/r1; DROP TABLE")
     alice.fill("#maintenance-comment", "why not")

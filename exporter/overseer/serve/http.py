@@ -30,7 +30,7 @@ from overseer.serve.api_query import ComponentQueryError, parse_component_query
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from overseer.serve.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
-from overseer.serve.status_page import PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
+from overseer.serve.status_page import FAVICON, PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
 if TYPE_CHECKING:
@@ -280,6 +280,9 @@ class _Handler(BaseHTTPRequestHandler):
             self._send(
                 200, page_file.body, page_file.content_type, head_only, compressible=True, extra=PAGE_HEADERS
             )
+        elif path == "/favicon.ico":
+            icon = self.server.page_files[FAVICON]
+            self._send(200, icon.body, icon.content_type, head_only, compressible=True, extra=PAGE_HEADERS)
         elif path in ("/", "/index.html"):
             self._send(
                 200, self.server.status_page, "text/html; charset=utf-8", head_only, extra=PAGE_HEADERS

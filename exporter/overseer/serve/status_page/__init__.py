@@ -10,7 +10,9 @@ CONTENT_TYPES = {
     ".html": "text/html; charset=utf-8",
     ".js": "text/javascript; charset=utf-8",
     ".css": "text/css; charset=utf-8",
+    ".svg": "image/svg+xml",
 }
+FAVICON = "favicon.svg"  # also served at /favicon.ico, where browsers and tools look for it unasked
 # The page runs only its own files and reads only this exporter: robot text can never become code.
 PAGE_HEADERS = (
     (
