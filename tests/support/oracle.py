@@ -22,6 +22,7 @@ from overseer.fleet import metric_families as contract
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 from overseer.fleet.metric_values import DROP_REASONS, NumericValues, message_counts
 from overseer.model import FleetModel
+from overseer.model.state import learned_period
 
 
 def family(spec: contract.MetricFamily) -> Metric:
@@ -73,6 +74,9 @@ class OracleCollector(Collector):
             add(contract.ROBOT_LEVEL, [robot.name], float(snapshot.robot_level(robot)))
             if robot.last_message_wall is not None:
                 add(contract.LAST_MESSAGE, [robot.name], robot.last_message_wall)
+            period = learned_period(robot)
+            if period is not None:
+                add(contract.PERIOD, [robot.name], round(period, 3))
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
                 level = snapshot.component_level(robot, key, component, up)

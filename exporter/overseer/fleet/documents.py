@@ -8,7 +8,7 @@ from typing import Any
 
 from overseer.levels import Level, severity_rank, worst
 from overseer.model import Component, FleetSnapshot, RobotState
-from overseer.model.state import robot_period
+from overseer.model.state import learned_period
 
 _COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 
@@ -62,7 +62,7 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
         "up": up,
         "publisher_alive": robot.publisher_alive,
         "last_message": robot.last_message_wall,
-        "period": robot_period(snapshot.limits, robot) if any(feed.period for feed in robot.feeds) else None,
+        "period": learned_period(robot),
         "timeout": snapshot.robot_timeout(robot),
         "transport": robot.transport,
         "components": len(robot.components),

@@ -24,6 +24,7 @@ from overseer.fleet.metric_values import NumericValues
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.model.snapshot import RobotTiming
+from overseer.model.state import learned_period
 
 # prometheus-client's number format (Go's), so values render exactly as its families' do.
 go_float = cast(Callable[[float], str], floatToGoString)
@@ -88,7 +89,7 @@ class FleetExposition:
         render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
-        robot_level, robot_up, last_message = [], [], []
+        robot_level, robot_up, last_message, periods = [], [], [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
@@ -107,6 +108,9 @@ class FleetExposition:
                     f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
                     f"{go_float(robot.last_message + robot.wall_offset)}\n"
                 )
+            period = learned_period(robot)
+            if period is not None:
+                periods.append(f"ros_diagnostics_robot_period_seconds{label}{go_float(round(period, 3))}\n")
         self._robots = current
         return ExpositionPart(
             len(current),
@@ -115,6 +119,7 @@ class FleetExposition:
                 "".join(robot_level).encode(),
                 "".join(robot_up).encode(),
                 "".join(last_message).encode(),
+                "".join(periods).encode(),
                 b"".join(changes),
                 b"".join(values),
                 b"".join(messages),

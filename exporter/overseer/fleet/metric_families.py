@@ -49,6 +49,14 @@ LAST_MESSAGE = MetricFamily(
     ("robot",),
     unit="seconds",
 )
+PERIOD = MetricFamily(
+    "ros_diagnostics_robot_period_seconds",
+    "gauge",
+    "How often the robot reports, as learned: its fastest producer's period. Components are STALE after "
+    "the larger of stale_after and stale_periods of their producer's period; absent until it is known.",
+    ("robot",),
+    unit="seconds",
+)
 LEVEL_CHANGES = MetricFamily(
     "ros_diagnostics_level_changes",
     "counter",
@@ -104,7 +112,7 @@ WEB_INFO = MetricFamily(
 )
 
 # Per robot and per component: a model's rendered part holds their lines, in this order.
-FLEET_FAMILIES = (LEVEL, ROBOT_LEVEL, ROBOT_UP, LAST_MESSAGE, LEVEL_CHANGES, VALUE, STATUS_MESSAGE)
+FLEET_FAMILIES = (LEVEL, ROBOT_LEVEL, ROBOT_UP, LAST_MESSAGE, PERIOD, LEVEL_CHANGES, VALUE, STATUS_MESSAGE)
 # The exporter's own, after the fleet's.
 EXPORTER_FAMILIES = (MESSAGES, STATUSES_DROPPED, STRINGS_TRUNCATED, SOURCE_ERRORS, BUILD_INFO, WEB_INFO)
 CONTRACT_FAMILIES = FLEET_FAMILIES + EXPORTER_FAMILIES

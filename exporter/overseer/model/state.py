@@ -153,10 +153,16 @@ def up_since(limits: FleetLimits, state: RobotState, now: float) -> float:
     return state.up_since
 
 
+def learned_period(robot: RobotState) -> float | None:
+    """The robot's own period as learned: its fastest feed's (None while no feed's is known)."""
+    periods = [feed.period for feed in robot.feeds if feed.period > 0.0]
+    return min(periods) if periods else None
+
+
 def robot_period(limits: FleetLimits, robot: RobotState) -> float:
     """The robot's own period: its fastest feed's, or `stale_after` while none is known."""
-    periods = [feed.period for feed in robot.feeds if feed.period > 0.0]
-    return min(periods) if periods else limits.stale_after
+    period = learned_period(robot)
+    return limits.stale_after if period is None else period
 
 
 def feed_stale_after(limits: FleetLimits, feed: Feed | None) -> float:
