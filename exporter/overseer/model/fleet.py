@@ -129,8 +129,10 @@ class FleetModel:
             old = feeds[index]
             if None in old.latest or (revision is not None and old.revision != revision):
                 return False
-            current = _learned(old, now, True)._replace(last_message=now)
-            bound_changed = feed_stale_after(self.limits, current) != feed_stale_after(self.limits, old)
+            current = _learned(old, now, True)
+            bound_changed = current.period != old.period and feed_stale_after(
+                self.limits, current
+            ) != feed_stale_after(self.limits, old)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -186,7 +188,7 @@ class FleetModel:
                 old_feed = feeds[position]
                 merge.left_out(old_feed)
                 learned = _learned(old_feed, now, old_feed.latest == latest)
-                new_feed = learned._replace(last_message=now, latest=latest, revision=old_feed.revision + 1)
+                new_feed = learned._replace(latest=latest, revision=old_feed.revision + 1)
                 feeds[position] = new_feed
             self._robots[robot] = RobotState(
                 robot,
@@ -244,7 +246,7 @@ class FleetModel:
             components = dict(state.components)
             listener = self._level_listener
             changes: list[LevelChange] = []
-            intern = sys.intern
+            intern, new = sys.intern, tuple.__new__
             # Written for speed (arrays that changed in every status come through here): the checks and
             # the merge of `_prepare` and `_Merge.status`, on statuses `_intact` found within every limit.
             for position, (wire_level, name, message, hardware_id, values) in changed:
@@ -256,27 +258,26 @@ class FleetModel:
                 previous = components[key]
                 level = _LEVELS[wire_level]
                 same_values = previous.values == values
-                hardware_id = hardware_id or previous.hardware_id
-                if (
-                    previous.level is level
-                    and previous.message == message
-                    and same_values
-                    and previous.hardware_id == hardware_id
-                ):
+                same_id = not hardware_id or hardware_id == previous.hardware_id
+                if previous.level is level and previous.message == message and same_values and same_id:
                     continue  # the status says nothing new
-                current = components[key] = Component(
-                    previous.key,
-                    level,
-                    intern(message),
-                    intern(hardware_id),
-                    previous.values if same_values else tuple([(intern(k), v) for k, v in values]),
-                    now,
-                    previous.level_changes + (previous.level is not level),
-                    feed,
+                # tuple.__new__ builds the named tuple without the Python call of its own __new__.
+                current = components[key] = new(
+                    Component,
+                    (
+                        previous.key,
+                        level,
+                        intern(message),
+                        previous.hardware_id if same_id else intern(hardware_id),
+                        previous.values if same_values else tuple([(intern(k), v) for k, v in values]),
+                        now,
+                        previous.level_changes + (previous.level is not level),
+                        feed,
+                    ),
                 )
                 if listener is not None and current.level is not previous.level:
                     changes.append(LevelChange(previous, current))
-            current_feed = _learned(old, now, True)._replace(last_message=now, revision=revision + 1)
+            current_feed = _learned(old, now, True)._replace(revision=revision + 1)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -485,18 +486,16 @@ def _feed_index(feeds: tuple[Feed, ...], name: str) -> int | None:
 
 
 def _learned(feed: Feed, now: float, same_components: bool) -> Feed:
-    """`feed` with the interval to a message at `now` learned, when the message carried what the last did.
+    """`feed` after a message at `now`, the interval learned when the message carried what the last did.
 
     An interval under a quarter of the period known is a burst (a forced update), not a period; the
     period is the upper median of the last `PERIOD_SAMPLES` intervals, so one late message does not move it.
     """
-    if not same_components:
-        return feed
     interval = now - feed.last_message
-    if interval <= 0.0 or interval < feed.period / 4:
-        return feed
+    if not same_components or interval <= 0.0 or interval < feed.period / 4:
+        return feed._replace(last_message=now)
     intervals = (*feed.intervals[-(PERIOD_SAMPLES - 1) :], interval)
-    return feed._replace(intervals=intervals, period=sorted(intervals)[len(intervals) // 2])
+    return feed._replace(last_message=now, intervals=intervals, period=sorted(intervals)[len(intervals) // 2])
 
 
 def _prepare(

@@ -148,9 +148,11 @@ class RobotState:
 def up_since(limits: FleetLimits, state: RobotState, now: float) -> float:
     """When the run of messages a message at `now` belongs to began: now, after a silence or a departure."""
     last = state.last_message
-    if last is None or not state.publisher_alive or now - last > robot_timeout(limits, state):
+    if last is None or not state.publisher_alive:
         return now
-    return state.up_since
+    if now - last <= limits.robot_timeout:  # within the shortest timeout a robot may have: no gap
+        return state.up_since
+    return now if now - last > robot_timeout(limits, state) else state.up_since
 
 
 def learned_period(robot: RobotState) -> float | None:
