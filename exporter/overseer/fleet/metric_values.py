@@ -7,7 +7,7 @@ import re
 from collections.abc import Iterable, Iterator, Mapping
 
 MESSAGE_RESULTS = ("received", "decode_error", "dropped")
-DROP_REASONS = ("robot_limit", "component_limit", "value_limit", "invalid_level")
+DROP_REASONS = ("robot_limit", "component_limit", "feed_limit", "value_limit", "invalid_level")
 
 _LEADING_NUMBER = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
 _BOOLEANS = {"true": 1.0, "false": 0.0, "True": 1.0, "False": 0.0}
