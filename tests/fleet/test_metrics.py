@@ -135,6 +135,25 @@ def test_forgotten_robot_disappears_from_exposition() -> None:
     assert 'robot="robot1"' in text
 
 
+def test_a_start_up_status_and_a_new_hardware_id_move_the_series_at_once_never_left_stale() -> None:
+    starting = DiagnosticStatus(0, "drive: Motor", "Node starting up", "", ())
+    rendering, model, clock = fleet_rendering({"robot1": [starting]})
+    assert (
+        'ros_diagnostics_level{component="drive: Motor",hardware_id="",robot="robot1"} 0.0'
+        in rendering.fast().decode()
+    )
+    for hardware_id in ("m1", "", "m2"):  # the real status, a broadcast without one, a swapped motor
+        clock.now += 1
+        model.apply("robot1", DiagnosticArray(0, 0, "", (starting._replace(hardware_id=hardware_id),)), "dds")
+        fast, oracle = rendering.both()
+        assert fast == oracle
+        text = fast.decode()
+        kept = hardware_id or "m1"
+        assert [line for line in text.splitlines() if line.startswith("ros_diagnostics_level{")] == [
+            f'ros_diagnostics_level{{component="drive: Motor",hardware_id="{kept}",robot="robot1"}} 0.0'
+        ]
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
