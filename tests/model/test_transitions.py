@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -11,6 +12,7 @@ from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.model.events import Event
+from overseer.model.fleet import LevelChange
 from overseer.model.transitions import TransitionDetector
 from support.examples import examples
 
@@ -54,7 +56,7 @@ class Fleet:
 
     def check(self) -> None:
         """Run the periodic snapshot comparison."""
-        self.detector.check(self.model.snapshot())
+        self.detector.check(self.model.told_snapshot())
 
     def take(self) -> list[Event]:
         """The events sent since the last call."""
@@ -378,4 +380,31 @@ def test_a_robot_up_and_down_between_two_checks_is_both_events_at_their_times() 
         ("robot_up", back),
         ("robot_down", gone),
         ("robot_up", again),
+    ]
+
+
+def test_a_check_that_sees_an_apply_sends_its_events_after_the_applys_own() -> None:
+    """The detector's thread may take its snapshot while an ingest thread is still telling the listener."""
+    fleet = Fleet()
+    telling, go_on = threading.Event(), threading.Event()
+
+    def slow_listener(robot: str, at: float, changes: list[LevelChange]) -> None:
+        telling.set()
+        go_on.wait(10)
+        fleet.detector.on_level_changes(robot, at, changes)
+
+    fleet.model.set_level_listener(slow_listener)
+    ingest = threading.Thread(target=fleet.publish, args=("r1", (0, "/Motor", "spinning")))
+    ingest.start()
+    assert telling.wait(10)
+    detector = threading.Thread(target=fleet.check)
+    detector.start()
+    detector.join(0.3)
+    assert detector.is_alive(), "the check went on while the apply it saw was still being told"
+    go_on.set()
+    ingest.join(10)
+    detector.join(10)
+    assert [(event.kind, event.component) for event in fleet.take()] == [
+        ("appeared", "/Motor"),
+        ("robot_up", None),
     ]

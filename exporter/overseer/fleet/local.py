@@ -128,6 +128,6 @@ class TransitionWatch:
     def _check_loop(self) -> None:
         while not self._stopping.wait(CHECK_INTERVAL_SECONDS):
             try:
-                self.detector.check(self._model.snapshot())
+                self.detector.check(self._model.told_snapshot())
             except Exception:  # a bug here must not end event detection for good
                 log.exception("event detection failed")

@@ -80,11 +80,32 @@ class FleetModel:
         self._truncated_strings = 0
         self._source_errors: Counter[tuple[str, str]] = Counter()
         self._level_listener: LevelListener | None = None
+        # Held from the end of an apply (taken under `_lock`) until its listener has been told, so that
+        # whoever saw the apply's result in a snapshot can wait for its events to be sent first.
+        self._telling = threading.Lock()
         self._clashed: dict[str, set[str]] = {}  # robot → names it reports kept apart by hardware_id
 
     def set_level_listener(self, listener: LevelListener | None) -> None:
         """Have `listener` told of every reported level change and every new component, as applied."""
         self._level_listener = listener
+
+    def _tell(self, listener: LevelListener, robot: str, at: float, changes: list[LevelChange]) -> None:
+        """Tell `listener` of an apply's changes, outside the model's lock, then let waiters on."""
+        try:
+            listener(robot, at, changes)
+        finally:
+            self._telling.release()
+
+    def told_snapshot(self) -> FleetSnapshot:
+        """A snapshot, returned once the level listener has been told of every change it shows.
+
+        The event detector compares these: the events it derives (a robot up) then follow the events of
+        the applies they saw (its components appearing), never overtake them.
+        """
+        snapshot = self.snapshot()
+        with self._telling:  # an apply the snapshot shows took this before `_lock` was let go
+            pass
+        return snapshot
 
     def count_source_error(self, transport: str, reason: str) -> None:
         """Count one failure of a transport to reach a robot (an unreachable master, a lost connection)."""
@@ -206,8 +227,10 @@ class FleetModel:
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
             self._message_counts[(transport, "dropped" if dropped else "received")] += 1
+            if changes and listener is not None:
+                self._telling.acquire()
         if changes and listener is not None:
-            listener(robot, wall, changes)
+            self._tell(listener, robot, wall, changes)
         return Applied(not dropped, new_feed.revision)
 
     def apply_changes(
@@ -292,8 +315,10 @@ class FleetModel:
                 up_since(self.limits, state, now),
             )
             self._message_counts[(transport, "received")] += 1
+            if changes and listener is not None:
+                self._telling.acquire()
         if changes and listener is not None:
-            listener(robot, wall, changes)
+            self._tell(listener, robot, wall, changes)
         return revision + 1
 
     def publisher_left(self, robot: str) -> None:
