@@ -295,7 +295,12 @@ def test_fake_publisher_silent_past_the_idle_timeout_is_dropped_and_reconnected(
 def test_fake_publisher_silent_for_longer_than_robot_timeout_keeps_its_connection(tmp_path: Path) -> None:
     with (
         running_master(tmp_path) as master,
-        fake_publisher(master, lambda n: [frame(VALID), 3.0, frame(VALID)], hold_open=True) as fake,
+        # Its period learned first (0.3 s), so that robot_timeout (2 s) is its bound, not three stale_after.
+        fake_publisher(
+            master,
+            lambda n: [frame(VALID), 0.3, frame(VALID), 0.3, frame(VALID), 3.0, frame(VALID)],
+            hold_open=True,
+        ) as fake,
         running_source(("r1", master.uri)) as (source, model),
     ):
         wait_for(lambda: robot_view(model, "r1")["up"], 10, message="r1 up")
