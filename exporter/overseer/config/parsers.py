@@ -80,7 +80,9 @@ def string(value: object, key: str) -> str:
 
 
 def boolean(value: object, key: str) -> bool:
-    """`value` when it is true or false."""
+    """`value` when it is true or false (a flag's text `true` or `false` too)."""
+    if isinstance(value, str) and value.lower() in ("true", "false"):
+        return value.lower() == "true"
     if not isinstance(value, bool):
         raise ConfigError(f"{key}: expected true or false, got {value!r}")
     return value
@@ -93,8 +95,18 @@ def listed(value: object, key: str) -> list[Any]:
     return value
 
 
+def positive_integer(value: object, key: str) -> int:
+    """`value` when it is a positive integer (not a bool; a flag's decimal text too)."""
+    number = int(value) if isinstance(value, str) and value.strip().isdigit() and len(value) < 20 else value
+    if not isinstance(number, int) or isinstance(number, bool) or number < 1:
+        raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
+    return number
+
+
 def whole_number(value: object, key: str, low: int, high: int, what: str = "an integer") -> int:
-    """`value` when it is an integer from `low` to `high` (not a bool)."""
+    """`value` when it is an integer from `low` to `high` (not a bool; a flag's decimal text too)."""
+    if isinstance(value, str) and value.strip().isdigit() and len(value) < 20:
+        value = int(value)
     if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
         raise ConfigError(f"{key}: expected {what} from {low} to {high}, got {value!r}")
     return value
