@@ -237,7 +237,7 @@ def _add_icinga2_flags(parser: argparse.ArgumentParser) -> None:
 
 
 _ICINGA2_FLAGS = (
-    ("url", "URL", "push to this Icinga 2 API, e.g. https://icinga.example:5665 (see README, Icinga 2)"),
+    ("url", "URL", "push to this Icinga 2 API, e.g. https://icinga.example:5665 (see docs/nagios-icinga.md)"),
     ("username", "NAME", "Icinga 2 ApiUser"),
     ("password-file", "PATH", "file whose first line is the ApiUser's password"),
     ("ca-file", "PATH", "CA certificate of the Icinga 2 API"),
