@@ -29,7 +29,8 @@ OPTIONS: tuple[Option, ...] = (
     option(
         "fleet.stale_after",
         "5s",
-        "a component not updated for this long (or three of its producer's periods, when longer) is STALE",
+        "a component not updated for this long (or three of its producer's periods, when longer) is STALE; "
+        "5s is the ROS aggregator's and Foxglove's default",
         metavar="DURATION",
     ),
     option(

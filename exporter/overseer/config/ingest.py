@@ -16,7 +16,8 @@ OPTIONS: tuple[Option, ...] = (
         "ingest.workers",
         f"one per core, at most {DEFAULT_INGEST_WORKERS_CAP}",
         "worker processes sharing the ingest, each following the robots whose name hashes to it "
-        f"(1 to {MAX_INGEST_WORKERS}); 1 ingests in the exporter's own process",
+        f"(1 to {MAX_INGEST_WORKERS}); one /metrics, API and check endpoint serve them all; 1 ingests in the "
+        "exporter's own process",
         metavar="N",
     ),
 )
