@@ -65,8 +65,8 @@ def test_external_url_flag_overrides_the_file(tmp_path: Path) -> None:
             "metrics.message_label_length: expected an integer from 1 to 1024, got 0",
         ),
         (
-            "metrics:\n  message_label_length: '2000'\n",  # a number as text, as its flag gives it
-            "metrics.message_label_length: expected an integer from 1 to 1024, got 2000",
+            "metrics:\n  message_label_length: '20'\n",  # quoted in YAML: a string, whatever it spells
+            "metrics.message_label_length: expected an integer from 1 to 1024, got '20'",
         ),
         ("metrics:\n  level_changes: 'no'\n", "metrics.level_changes: expected true or false, got 'no'"),
         (
@@ -159,6 +159,6 @@ def test_run_with_a_bad_external_url_exits_2_with_one_line() -> None:
     )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
-        "overseer run: configuration error: web.external_url: expected http(s)://HOST[:PORT][/PATH], "
-        "got 'overseer:9849'"
+        "overseer run: configuration error: --web.external-url (web.external_url): "
+        "expected http(s)://HOST[:PORT][/PATH], got 'overseer:9849'"
     ]

@@ -8,6 +8,7 @@ sections really read, the flags to the tables, and the reference to both.
 from __future__ import annotations
 
 import dataclasses
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -32,8 +33,9 @@ from overseer.config import (
     zenoh,
 )
 from overseer.config.loading import ALL_OPTIONS
-from overseer.config.options import Option, flag_names, overrides
+from overseer.config.options import Option, flag_names, naming_the_flag, overrides
 from overseer.config.reference import BEGIN, END, reference, with_reference
+from overseer.model import FleetLimits
 from testbed.paths import REPO
 
 CONFIGURATION_DOCS = REPO / "docs" / "configuration.md"
@@ -79,7 +81,7 @@ def test_every_option_is_a_key_its_section_reads_and_says_so_when_it_is_bad(tmp_
         (ros1, ros1.Ros1Config),
         (ros2, ros2.Ros2Config),
         (zenoh, zenoh.ZenohConfig),
-        (fleet, fleet.FleetLimits),
+        (fleet, FleetLimits),
         (metrics, metrics.MetricsConfig),
         (events, events.EventsConfig),
         (ingest, ingest.IngestConfig),
@@ -140,12 +142,47 @@ def test_a_flag_gives_its_key_the_value_as_text_and_the_section_parses_it() -> N
     assert (config.dds.enabled, config.ingest.workers) == (False, 3)
 
 
+def test_a_flag_spells_a_number_or_boolean_that_a_quoted_value_in_the_file_does_not(tmp_path: Path) -> None:
+    flags = ["--fleet.max-robots=20", "--metrics.level-changes=false", "--dds.max-participant-index=8"]
+    config = load_config(None, overrides(parser_of(COMMANDS).parse_args(["run", *flags]), ALL_OPTIONS), {})
+    assert (config.fleet.max_robots, config.metrics.level_changes, config.dds.max_participant_index) == (
+        20,
+        False,
+        8,
+    )
+    for text, message in (
+        ("fleet:\n  max_robots: '20'\n", "fleet.max_robots: expected a positive integer, got '20'"),
+        (
+            "metrics:\n  level_changes: 'false'\n",
+            "metrics.level_changes: expected true or false, got 'false'",
+        ),
+    ):
+        path = tmp_path / "overseer.yml"
+        path.write_text(text, encoding="utf-8")
+        with pytest.raises(ConfigError, match=re.escape(message)):
+            load_config(path, {}, environ={})
+
+
 def test_a_bad_flag_is_named_by_its_key_as_a_bad_file_would_be() -> None:
     args = parser_of(COMMANDS).parse_args(["run", "--fleet.stale-after=soon"])
     with pytest.raises(
         ConfigError, match=r"^fleet\.stale_after: expected a duration such as 5s, got 'soon'$"
     ):
         load_config(None, overrides(args, ALL_OPTIONS), environ={})
+
+
+def test_the_error_of_a_bad_flag_names_the_flag_typed_and_its_key() -> None:
+    message = "fleet.stale_after: expected a duration such as 5s, got 'soon'"
+    typed = parser_of(COMMANDS).parse_args(["run", "--fleet.stale-after=soon"])
+    assert naming_the_flag(message, typed, ALL_OPTIONS) == (
+        "--fleet.stale-after (fleet.stale_after): expected a duration such as 5s, got 'soon'"
+    )
+    from_the_file = parser_of(COMMANDS).parse_args(["run"])
+    assert naming_the_flag(message, from_the_file, ALL_OPTIONS) == message
+    peers = parser_of(COMMANDS).parse_args(["run", "--dds.peer=a", "--dds.peer=:0"])
+    assert (
+        naming_the_flag("dds.peers[1]: bad port", peers, ALL_OPTIONS) == "--dds.peer (dds.peers[1]): bad port"
+    )
 
 
 def test_a_file_only_option_has_no_flag_and_is_documented_so() -> None:

@@ -8,9 +8,9 @@ import sys
 
 from overseer.commands import Command
 from overseer.commands.signals import wait_for_signal
-from overseer.config import load_config
+from overseer.config import ConfigError, load_config
 from overseer.config.loading import ALL_OPTIONS
-from overseer.config.options import add_flags, overrides
+from overseer.config.options import add_flags, naming_the_flag, overrides
 from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
@@ -24,7 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the fleet until SIGTERM or SIGINT; 1 when it cannot start or stop cleanly."""
-    config = load_config(args.config_file, overrides(args, ALL_OPTIONS))
+    try:
+        config = load_config(args.config_file, overrides(args, ALL_OPTIONS))
+    except ConfigError as error:
+        raise ConfigError(naming_the_flag(str(error), args, ALL_OPTIONS)) from None
     configure_logging(config.log_level, config.log_format)
     from overseer.app import (
         Exporter,  # the exporter (and its middleware) loads for a valid configuration only

@@ -76,8 +76,8 @@ OPTIONS: tuple[Option, ...] = (
         "dds.domains",
         "ROS_DOMAIN_ID, else 0",
         "a DDS domain (= ROS_DOMAIN_ID) to join; repeat for several. In the file, a domain may be "
-        "{id: 57, robot_name: robot57}: one robot, named, for its un-namespaced topics (without a name they are "
-        "robot domain<ID>, or named by their nodes' namespaces)",
+        "{id: 57, robot_name: robot57}: one robot, named, for its un-namespaced topics (without a name "
+        "they are robot domain<ID>, or named by their nodes' namespaces)",
         kind="repeated",
         metavar="ID",
         flag="--dds.domain",

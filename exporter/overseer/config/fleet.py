@@ -10,6 +10,7 @@ from typing import Any
 from overseer.config.errors import ConfigError
 from overseer.config.options import Option, file_only, option
 from overseer.config.parsers import (
+    FlagText,
     listed,
     parse_duration,
     positive_integer,
@@ -152,7 +153,7 @@ def stale_overrides(value: object) -> tuple[StaleOverride, ...]:
 
 def _stale_periods(value: object) -> float:
     number = value
-    if isinstance(value, str):  # as a flag gives it
+    if isinstance(value, FlagText):
         with contextlib.suppress(ValueError):
             number = float(value)
     if isinstance(number, bool) or not isinstance(number, int | float) or not 1 <= number <= 100:

@@ -14,6 +14,8 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from overseer.config.parsers import FlagText
+
 # How a flag carries its value: one value, a value per repetition (a list), or none (the key takes
 # `value`: a switch).
 FlagKind = Literal["value", "repeated", "switch"]
@@ -91,7 +93,7 @@ def overrides(args: argparse.Namespace, options: Iterable[Option]) -> dict[str, 
     """The dotted keys the flags given in `args` set, with the values as given (the sections parse them)."""
     found: dict[str, object] = {}
     for entry in options:
-        given = {flag.name: getattr(args, _dest(flag)) for flag in entry.flags}
+        given = {flag.name: _as_typed(getattr(args, _dest(flag))) for flag in entry.flags}
         given = {name: value for name, value in given.items() if value is not None}
         if not given:
             continue
@@ -102,9 +104,30 @@ def overrides(args: argparse.Namespace, options: Iterable[Option]) -> dict[str, 
     return found
 
 
+def naming_the_flag(message: str, args: argparse.Namespace, options: Iterable[Option]) -> str:
+    """`message`, an error that names a key, naming the flag given for it too (the user typed the flag)."""
+    for entry in options:
+        rest = message.removeprefix(entry.key)
+        if rest == message or rest[:1] not in (":", "["):
+            continue
+        given = [flag.name for flag in entry.flags if getattr(args, _dest(flag), None) is not None]
+        where, _, what = rest.partition(":")
+        return f"{', '.join(given)} ({entry.key}{where}):{what}" if given else message
+    return message
+
+
 def flag_names(options: Sequence[Option]) -> list[str]:
     """Every flag of `options`, in order."""
     return [flag.name for entry in options for flag in entry.flags]
+
+
+def _as_typed(value: object) -> object:
+    """A flag's text (or each repetition's) as `FlagText`; a switch's value as it is."""
+    if isinstance(value, str):
+        return FlagText(value)
+    if isinstance(value, list):
+        return [_as_typed(item) for item in value]
+    return value
 
 
 def _dest(flag: Flag) -> str:
