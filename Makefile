@@ -7,7 +7,7 @@ PYTEST_ARGS ?=
 LOCK := requirements/lock.txt requirements/tools.txt
 LINT_CHECKS := lint-ruff lint-format lint-mypy lint-imports lint-rules
 
-.PHONY: setup system-deps demo test test-quick lint $(LINT_CHECKS) lock bench clean
+.PHONY: setup system-deps demo test test-quick lint $(LINT_CHECKS) lock bench docs screenshot clean
 
 setup: $(VENV)/.installed
 
@@ -67,6 +67,14 @@ lock:
 
 bench: setup system-deps
 	$(BIN)/python -m bench
+
+# The configuration reference in docs/configuration.md, written from the config sections' option tables.
+docs: setup
+	$(BIN)/python -m overseer.config.reference docs/configuration.md
+
+# The README's picture of the status page (docs/status-page.png), taken from `overseer demo` in Chromium.
+screenshot: setup system-deps
+	PYTHON=$(BIN)/python ./scripts/screenshot
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build exporter/overseer/codec/*.so

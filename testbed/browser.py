@@ -64,7 +64,7 @@ def cannot_drive(error: Exception) -> str:
     return (
         f"playwright {metadata.version('playwright')} (made for chromium {bundled}) cannot drive chromium "
         f"{system} ({distance}): {error}. Pin a Playwright made for a Chromium nearer Debian's "
-        "(README, Tests)"
+        "(CONTRIBUTING.md, Playwright and Chromium)"
     )
 
 

@@ -30,10 +30,10 @@ from overseer.model.events import EventSink
 from overseer.push.alertmanager_silences import AlertmanagerSilences
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import Icinga2Push
+from overseer.routes import JsonRoute
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
 from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
-from overseer.serve.routes import JsonRoute
 from overseer.serve.web_config import load_web_config
 from overseer.sources import enabled_transports
 from overseer.sources.ros2 import require_rclpy
@@ -93,16 +93,11 @@ class Exporter:
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
-        answer_events = events_route(None if self.history is None else self.history.store)
         maintenance_api = MaintenanceApi(
             self.maintenance, config.maintenance.writers, config.web.enable_maintenance_api
         )
         routes: dict[str, JsonRoute] = {
-            EVENTS_PATH: lambda request: (
-                answer_events(request.query)
-                if request.method in ("GET", "HEAD")
-                else (405, {"error": f"{request.method} is not answered at {EVENTS_PATH}; GET it"})
-            ),
+            EVENTS_PATH: events_route(None if self.history is None else self.history.store),
             MAINTENANCE_PATH: maintenance_api.answer,
         }
         self.server = OverseerServer(

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from enum import IntEnum
 
+from overseer.severity import SEVERITY_RANK, WORST_RANK
+
 
 class Level(IntEnum):
     """A diagnostic level; the numbers are ROS's and Nagios's (OK, WARNING, CRITICAL, UNKNOWN)."""
@@ -15,13 +17,9 @@ class Level(IntEnum):
     STALE = 3
 
 
-# ERROR > WARN > STALE > OK, as Nagios ranks CRITICAL > WARNING > UNKNOWN > OK; a numeric max is wrong.
-_SEVERITY_RANK = {Level.OK: 0, Level.STALE: 1, Level.WARN: 2, Level.ERROR: 3}
-
-
 def severity_rank(level: Level) -> int:
-    """Rank of a level in the severity order (higher is worse)."""
-    return _SEVERITY_RANK[level]
+    """Rank of a level in the severity order (higher is worse; `overseer.severity`)."""
+    return SEVERITY_RANK[level]
 
 
 def worst(levels: Iterable[Level]) -> Level:
@@ -29,9 +27,9 @@ def worst(levels: Iterable[Level]) -> Level:
     result = Level.OK
     rank = 0
     for level in levels:
-        level_rank = _SEVERITY_RANK[level]
+        level_rank = SEVERITY_RANK[level]
         if level_rank > rank:
             result, rank = level, level_rank
-            if rank == 3:
+            if rank == WORST_RANK:
                 break
     return result

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import time  # built into the interpreter: no start-up cost
 
+from overseer.severity import SEVERITY_RANK
+
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (14 ms)
 if TYPE_CHECKING:
     import re
@@ -19,15 +21,13 @@ OK, WARNING, CRITICAL, UNKNOWN = 0, 1, 2, 3
 STATE_NAMES = ("OK", "WARNING", "CRITICAL", "UNKNOWN")
 STALE_LEVEL = 3
 
-# Rank by Nagios state: CRITICAL > WARNING > UNKNOWN > OK. A numeric max would rank UNKNOWN worst.
-_SEVERITY_RANK = (0, 2, 3, 1)
 _COUNT_LABELS = (("error", 2), ("warn", 1), ("stale", 3), ("ok", 0))
 _SUMMARY_COMPONENTS = 3
 _SUMMARY_MESSAGE_CHARS = 60
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"  # compiled on first use, by re's cache
 
 
-class Component:
+class ReportedComponent:
     """One diagnostic component as the exporter's JSON API reports it."""
 
     __slots__ = ("hardware_id", "level", "message", "name", "values")
@@ -56,7 +56,7 @@ class Maintenance:
         self.comment = comment
 
 
-class Robot:
+class ReportedRobot:
     """One robot as the exporter's JSON API reports it."""
 
     __slots__ = ("components", "generated_at", "last_message", "maintenance", "name", "publisher_alive", "up")
@@ -67,7 +67,7 @@ class Robot:
         up: bool,
         last_message: float | None,
         generated_at: float,
-        components: list[Component],
+        components: list[ReportedComponent],
         publisher_alive: bool = True,
         maintenance: Maintenance | None = None,
     ) -> None:
@@ -104,15 +104,15 @@ class Settings:
 
 def worst_state(states: list[int]) -> int:
     """The most severe Nagios state by CRITICAL > WARNING > UNKNOWN > OK; OK when empty."""
-    return max(states, key=_SEVERITY_RANK.__getitem__, default=OK)
+    return max(states, key=SEVERITY_RANK.__getitem__, default=OK)
 
 
-def state_of(component: Component, stale_state: int) -> int:
+def state_of(component: ReportedComponent, stale_state: int) -> int:
     """The Nagios state of a component: its level, or `stale_state` when it is stale."""
     return stale_state if component.level == STALE_LEVEL else component.level
 
 
-def select(components: list[Component], settings: Settings) -> list[Component]:
+def select(components: list[ReportedComponent], settings: Settings) -> list[ReportedComponent]:
     """The components whose name contains `settings.name` (any case) and matches `settings.name_regex`."""
     needle = settings.name.casefold()
     pattern = settings.name_regex
@@ -137,7 +137,7 @@ class Verdict:
         self,
         state: int,
         summary: str,
-        sections: list[tuple[str, list[Component]]],
+        sections: list[tuple[str, list[ReportedComponent]]],
         perfdata: list[str],
     ) -> None:
         """Keep the fields."""
@@ -160,7 +160,7 @@ class Verdict:
         return lines
 
 
-def judge(robot: Robot, settings: Settings) -> Verdict:
+def judge(robot: ReportedRobot, settings: Settings) -> Verdict:
     """The verdict on `robot`: its components chosen by `settings` and judged the Nagios way.
 
     A robot in maintenance is judged the same; the summary says until when and why (Icinga's downtime,
@@ -172,7 +172,7 @@ def judge(robot: Robot, settings: Settings) -> Verdict:
     return verdict
 
 
-def judge_state(robot: Robot, settings: Settings) -> Verdict:
+def judge_state(robot: ReportedRobot, settings: Settings) -> Verdict:
     """`judge` without the maintenance window."""
     name = clean(robot.name)
     if not robot.up:
@@ -207,7 +207,7 @@ def maintenance_text(maintenance: Maintenance) -> str:
     return f" [in maintenance until {until}, {clean(maintenance.author)}: {comment}]"
 
 
-def down_text(robot: Robot) -> str:
+def down_text(robot: ReportedRobot) -> str:
     """Why a robot is down: its publisher left, silent for how long, or never heard from."""
     if not robot.publisher_alive:
         return "its diagnostics publisher left (the middleware said so)"
@@ -217,7 +217,7 @@ def down_text(robot: Robot) -> str:
     return f"no diagnostics received for {silent_seconds} s"
 
 
-def no_match_text(robot: Robot, settings: Settings) -> str:
+def no_match_text(robot: ReportedRobot, settings: Settings) -> str:
     """Why no component is left to judge."""
     if not robot.components:
         return "the robot reports no components"
@@ -229,7 +229,7 @@ def no_match_text(robot: Robot, settings: Settings) -> str:
     return f"no component with {' and '.join(wanted)} among its {len(robot.components)} components"
 
 
-def summary(components: list[Component], states: list[int], state: int) -> str:
+def summary(components: list[ReportedComponent], states: list[int], state: int) -> str:
     """The status line's text: the components in the worst state with their messages, or all is well."""
     if state == OK:
         return f"{len(components)} component{'s' if len(components) != 1 else ''} OK"
@@ -246,18 +246,18 @@ def summary(components: list[Component], states: list[int], state: int) -> str:
     )
 
 
-def leaves_first(components: list[Component]) -> list[Component]:
+def leaves_first(components: list[ReportedComponent]) -> list[ReportedComponent]:
     """`components` with group statuses (names that prefix another's) after the leaves they summarise."""
     names = [component.name for component in components]
 
-    def is_group(component: Component) -> bool:
+    def is_group(component: ReportedComponent) -> bool:
         prefix = component.name.rstrip("/") + "/"
         return any(name.startswith(prefix) for name in names)
 
     return sorted(components, key=is_group)
 
 
-def short_message(component: Component) -> str:
+def short_message(component: ReportedComponent) -> str:
     """A component's message cut for the status line; stale ones say so."""
     message = clean(component.message)
     if component.level == STALE_LEVEL:
@@ -268,8 +268,8 @@ def short_message(component: Component) -> str:
 
 
 def sections(
-    components: list[Component], states: list[int], stale_state: int
-) -> list[tuple[str, list[Component]]]:
+    components: list[ReportedComponent], states: list[int], stale_state: int
+) -> list[tuple[str, list[ReportedComponent]]]:
     """The paper's sensor lists (CRITICAL, WARNING, stale, OK), each with its components; no empty one."""
     titles = (
         "CRITICAL sensor(s) list:",
@@ -277,18 +277,18 @@ def sections(
         f"{STATE_NAMES[stale_state]} (stale) sensor(s) list:",
         "OK sensor(s) list:",
     )
-    members: list[list[Component]] = [[] for _ in titles]
+    members: list[list[ReportedComponent]] = [[] for _ in titles]
     for component, state in zip(components, states, strict=True):
         members[section_of(component, state)].append(component)
     return [(title, listed) for title, listed in zip(titles, members, strict=True) if listed]
 
 
-def section_of(component: Component, state: int) -> int:
+def section_of(component: ReportedComponent, state: int) -> int:
     """The long-output section of a component: 0 CRITICAL, 1 WARNING, 2 stale (whatever its state), 3 OK."""
     return 2 if component.level == STALE_LEVEL else (3, 1, 0)[state]
 
 
-def component_line(component: Component, verbosity: int) -> str:
+def component_line(component: ReportedComponent, verbosity: int) -> str:
     """One long-output line: name, hardware id when set, message, and key-values when verbose."""
     line = clean(component.name)
     if component.hardware_id:
@@ -304,7 +304,7 @@ def clean(text: str) -> str:
     return " ".join(text.replace("|", "¦").split())
 
 
-def perfdata(components: list[Component], with_values: bool) -> list[str]:
+def perfdata(components: list[ReportedComponent], with_values: bool) -> list[str]:
     """Counts per level, then (when asked) every numeric key-value, as Nagios perfdata items."""
     levels = [component.level for component in components]
     items = [f"'{label}'={levels.count(level)};;;0" for label, level in _COUNT_LABELS]
@@ -313,7 +313,7 @@ def perfdata(components: list[Component], with_values: bool) -> list[str]:
     return items
 
 
-def value_perfdata(components: list[Component]) -> list[str]:
+def value_perfdata(components: list[ReportedComponent]) -> list[str]:
     """`'<component>:<key>'=<number>;;;;` for every key-value that is a finite number."""
     items = []
     for component in components:

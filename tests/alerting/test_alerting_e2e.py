@@ -9,8 +9,8 @@ each notification from the exporter receiving its cause, and prints the times.
 
 By default it runs the fast profile's rules with 1s intervals and 1s Alertmanager batching, to keep the suite
 quick. OVERSEER_E2E_PROFILE=fast or =default runs a shipped profile exactly as deployed (Prometheus intervals,
-rules, the Alertmanager example's timing, the exporter's default timeouts): that measures the numbers in the
-README and takes about 2 and 8 minutes.
+rules, the Alertmanager example's timing, the exporter's default timeouts): that measures the numbers in
+bench/README.md and takes about 2 and 8 minutes.
 """
 
 from __future__ import annotations

@@ -8,8 +8,6 @@ import sys
 import pytest
 
 from overseer import __version__
-from overseer.check.document import CheckError
-from overseer.check.http_client import parse_answer, parse_url, quote_path, request_bytes
 from overseer.check.plugin import main, options_from_flags, parse_flags
 from overseer.verdict import CRITICAL, UNKNOWN, WARNING
 
@@ -146,55 +144,6 @@ def test_empty_hostname_and_port_fall_back_to_defaults_as_empty_nagios_macros_do
     )
 
 
-@pytest.mark.parametrize(
-    ("url", "parts"),
-    [
-        ("http://127.0.0.1:9849/api/v1/robots/r", (False, "127.0.0.1", 9849, "/api/v1/robots/r")),
-        ("https://o.example/x", (True, "o.example", 443, "/x")),
-        ("HTTP://o.example", (False, "o.example", 80, "/")),
-        ("http://[::1]:81/p", (False, "::1", 81, "/p")),
-    ],
-)
-def test_parse_url(url: str, parts: tuple[bool, str, int, str]) -> None:
-    target = parse_url(url)
-    assert (target.tls, target.host, target.port, target.path) == parts
-
-
-@pytest.mark.parametrize("url", ["http://:80/", "http://h:0/", "http://h:x/", "h:80"])
-def test_parse_url_rejects_bad_urls(url: str) -> None:
-    with pytest.raises(CheckError, match="invalid URL"):
-        parse_url(url)
-
-
-def test_quote_path_keeps_slashes_and_encodes_the_rest() -> None:
-    assert quote_path("site_a/robot 7?ü") == "site_a/robot%207%3F%C3%BC"
-
-
-def test_request_sends_basic_auth_and_host() -> None:
-    request = request_bytes(parse_url("http://[::1]:81/api"), "user:pass")
-    assert request.startswith(b"GET /api HTTP/1.0\r\nHost: [::1]:81\r\n")
-    assert b"\r\nAuthorization: Basic dXNlcjpwYXNz\r\n" in request
-    assert request.endswith(b"\r\n\r\n")
-
-
-def test_parse_answer_honours_content_length() -> None:
-    answer = parse_answer(b"HTTP/1.0 404 Not Found\r\nContent-Length: 2\r\n\r\n{}garbage", "u")
-    assert (answer.status, answer.reason, answer.body) == (404, "Not Found", b"{}")
-
-
-@pytest.mark.parametrize(
-    ("raw", "message"),
-    [
-        (b"", "no HTTP answer from u"),
-        (b"SSH-2.0-OpenSSH\r\n\r\n", "no HTTP answer from u"),
-        (b"HTTP/1.1 200 OK\r\nContent-Length: 10\r\n\r\n{}", "answer from u cut short: 2 of 10 bytes"),
-    ],
-)
-def test_parse_answer_rejects_what_is_not_a_whole_http_answer(raw: bytes, message: str) -> None:
-    with pytest.raises(CheckError, match=message):
-        parse_answer(raw, "u")
-
-
 def test_check_imports_no_json_re_or_typing_only_c_modules_and_its_own() -> None:
     code = (
         "import sys; before = set(sys.modules); import overseer.check;"
@@ -208,7 +157,10 @@ def test_check_imports_no_json_re_or_typing_only_c_modules_and_its_own() -> None
         "overseer",
         "overseer.check",
         "overseer.check.plugin",
-        "overseer.check.http_client",
+        "overseer.client",
+        "overseer.client.exporter",
+        "overseer.client.http",
+        "overseer.severity",
         "overseer.check.api_reader",
         "overseer.check.document",
         "overseer.verdict",

@@ -10,7 +10,16 @@ from typing import Any
 import pytest
 
 from overseer.check.document import CheckError, robot_from_document
-from overseer.verdict import CRITICAL, UNKNOWN, Component, Maintenance, Robot, Settings, judge, plugin_output
+from overseer.verdict import (
+    CRITICAL,
+    UNKNOWN,
+    Maintenance,
+    ReportedComponent,
+    ReportedRobot,
+    Settings,
+    judge,
+    plugin_output,
+)
 
 UNTIL = 1795521600.0  # 2026-11-24 12:00 UTC
 
@@ -42,7 +51,7 @@ def test_the_window_is_added_to_the_status_line_and_the_state_is_unchanged() -> 
 
 
 def test_a_robot_down_in_maintenance_is_still_down_and_says_why_it_is_quiet() -> None:
-    robot = Robot("r1", False, 50.0, 100.0, [], maintenance=Maintenance("w1", UNTIL, "bob", "parked"))
+    robot = ReportedRobot("r1", False, 50.0, 100.0, [], maintenance=Maintenance("w1", UNTIL, "bob", "parked"))
     verdict = judge(robot, Settings())
     assert verdict.state == UNKNOWN
     assert verdict.status_text.startswith(
@@ -52,12 +61,12 @@ def test_a_robot_down_in_maintenance_is_still_down_and_says_why_it_is_quiet() ->
 
 def test_hostile_comments_stay_on_the_status_line_without_starting_perfdata() -> None:
     comment = "a|b='1'\nCRITICAL - forged line\t" + "x" * 200
-    robot = Robot(
+    robot = ReportedRobot(
         "r1",
         True,
         100.0,
         101.0,
-        [Component("/A", "", 0, "ok", [])],
+        [ReportedComponent("/A", "", 0, "ok", [])],
         maintenance=Maintenance("w1", UNTIL, "eve|x", comment),
     )
     output = plugin_output(judge(robot, Settings()))

@@ -15,8 +15,8 @@ from overseer.verdict import (
     OK,
     UNKNOWN,
     WARNING,
-    Component,
-    Robot,
+    ReportedComponent,
+    ReportedRobot,
     Settings,
     parse_number,
     perf_label,
@@ -30,7 +30,7 @@ from overseer.verdict import (
 from overseer.verdict import judge as judge_verdict
 
 
-def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
+def judge(robot: ReportedRobot, settings: Settings) -> tuple[int, str]:
     """The exit state and what the check prints for `robot`."""
     verdict = judge_verdict(robot, settings)
     return verdict.state, plugin_output(verdict, settings.verbosity)
@@ -38,14 +38,16 @@ def judge(robot: Robot, settings: Settings) -> tuple[int, str]:
 
 def component(
     name: str, level: int = 0, message: str = "OK", hardware_id: str = "", **values: str
-) -> Component:
+) -> ReportedComponent:
     """A component with key-values given as keyword arguments."""
-    return Component(name, hardware_id, level, message, list(values.items()))
+    return ReportedComponent(name, hardware_id, level, message, list(values.items()))
 
 
-def robot(*components: Component, up: bool = True, last_message: float | None = 100.0) -> Robot:
+def robot(
+    *components: ReportedComponent, up: bool = True, last_message: float | None = 100.0
+) -> ReportedRobot:
     """robot1 with `components`, as of time 112."""
-    return Robot("robot1", up, last_message, 112.0, list(components))
+    return ReportedRobot("robot1", up, last_message, 112.0, list(components))
 
 
 def test_worst_state_ranks_critical_over_warning_over_unknown_over_ok() -> None:

@@ -129,7 +129,9 @@ def test_run_with_bad_flag_value_exits_nonzero(tmp_path: Path) -> None:
         [*overseer_command(), "run", "--fleet.stale-after=fast"], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 2
-    assert "--fleet.stale-after: expected a duration such as 5s, got 'fast'" in result.stderr
+    assert (
+        "--fleet.stale-after (fleet.stale_after): expected a duration such as 5s, got 'fast'" in result.stderr
+    )
 
 
 @pytest.mark.servers

@@ -7,8 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from overseer.cli import _exporter_overrides, _parser
+from overseer.cli import COMMANDS, parser_of
 from overseer.config import Config, ConfigError, load_config
+from overseer.config.loading import ALL_OPTIONS
+from overseer.config.options import overrides
 from overseer.config.ros1 import Ros1Robot
 from overseer.ros_master import master_host
 from testbed.processes import overseer_command
@@ -22,7 +24,7 @@ def write(tmp_path: Path, text: str) -> Path:
 
 def run_flags(*flags: str) -> Config:
     """The configuration `overseer run FLAGS` would start with."""
-    return load_config(None, _exporter_overrides(_parser().parse_args(["run", *flags])))
+    return load_config(None, overrides(parser_of(COMMANDS).parse_args(["run", *flags]), ALL_OPTIONS))
 
 
 def test_defaults_label_the_messages_of_problems_cut_to_100_characters_and_link_nowhere() -> None:
@@ -47,8 +49,8 @@ def test_file_sets_message_labels_and_external_url(tmp_path: Path) -> None:
 
 def test_external_url_flag_overrides_the_file(tmp_path: Path) -> None:
     path = write(tmp_path, "web:\n  external_url: http://a:9849\n")
-    args = _parser().parse_args(["run", "--web.external-url=http://b:9849/"])
-    assert load_config(path, _exporter_overrides(args)).web.external_url == "http://b:9849"
+    args = parser_of(COMMANDS).parse_args(["run", "--web.external-url=http://b:9849/"])
+    assert load_config(path, overrides(args, ALL_OPTIONS)).web.external_url == "http://b:9849"
 
 
 @pytest.mark.parametrize(
@@ -63,8 +65,8 @@ def test_external_url_flag_overrides_the_file(tmp_path: Path) -> None:
             "metrics.message_label_length: expected an integer from 1 to 1024, got 0",
         ),
         (
-            "metrics:\n  message_label_length: '100'\n",
-            "metrics.message_label_length: expected an integer from 1 to 1024, got '100'",
+            "metrics:\n  message_label_length: '20'\n",  # quoted in YAML: a string, whatever it spells
+            "metrics.message_label_length: expected an integer from 1 to 1024, got '20'",
         ),
         ("metrics:\n  level_changes: 'no'\n", "metrics.level_changes: expected true or false, got 'no'"),
         (
@@ -157,6 +159,6 @@ def test_run_with_a_bad_external_url_exits_2_with_one_line() -> None:
     )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
-        "overseer run: configuration error: web.external_url: expected http(s)://HOST[:PORT][/PATH], "
-        "got 'overseer:9849'"
+        "overseer run: configuration error: --web.external-url (web.external_url): "
+        "expected http(s)://HOST[:PORT][/PATH], got 'overseer:9849'"
     ]

@@ -69,8 +69,14 @@ def test_bad_values_name_their_key(tmp_path: Path, yaml_text: str, message: str)
 @pytest.mark.parametrize(
     ("flag", "message"),
     [
-        ("--events.max-size=huge", "--events.max-size: expected a size such as 500MB or 1GB, got 'huge'"),
-        ("--events.retention=0s", "--events.retention: must be a positive duration, got '0s'"),
+        (
+            "--events.max-size=huge",
+            "--events.max-size (events.max_size): expected a size such as 500MB or 1GB, got 'huge'",
+        ),
+        (
+            "--events.retention=0s",
+            "--events.retention (events.retention): must be a positive duration, got '0s'",
+        ),
     ],
 )
 def test_bad_flags_stop_the_exporter_with_one_line(flag: str, message: str) -> None:

@@ -1,8 +1,8 @@
 """The pinned Playwright drives the Chromium Debian ships: a pair that stops working says which pair.
 
 Debian's chromium moves with security updates, the Playwright pin with the lock; when they part, this test
-fails first, with "playwright X (made for chromium B) cannot drive chromium Y: ...", and the README's Tests
-section says what to do.
+fails first, with "playwright X (made for chromium B) cannot drive chromium Y: ...", and CONTRIBUTING.md's
+Playwright and Chromium section says what to do.
 """
 
 from __future__ import annotations

@@ -223,8 +223,8 @@ def test_the_icinga2_flags_override_the_file_and_name_their_key(tmp_path: Path) 
     )
     assert done.returncode == 2
     assert done.stderr == (
-        "overseer run: configuration error: icinga2.password_file: cannot read '/nonexistent/pw': "
-        "No such file or directory\n"
+        "overseer run: configuration error: --icinga2.password-file (icinga2.password_file): "
+        "cannot read '/nonexistent/pw': No such file or directory\n"
     )
 
 

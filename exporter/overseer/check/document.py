@@ -1,4 +1,4 @@
-"""The check's reading of the exporter's JSON API: one robot's document into the verdict's `Robot`.
+"""The check's reading of the exporter's JSON API: one robot's document into the verdict's `ReportedRobot`.
 
 Every field is checked: a missing or mistyped one is a `CheckError`, which the check reports as UNKNOWN
 naming the field. Only the standard library's cheapest modules are used here (the check's start-up).
@@ -6,19 +6,19 @@ naming the field. Only the standard library's cheapest modules are used here (th
 
 from __future__ import annotations
 
-from overseer.verdict import Component, Maintenance, Robot
+from overseer.verdict import Maintenance, ReportedComponent, ReportedRobot
 
 
 class CheckError(Exception):
     """A failure that ends the check in UNKNOWN; its text is the status line's."""
 
 
-def robot_from_document(document: object) -> Robot:
+def robot_from_document(document: object) -> ReportedRobot:
     """The robot in a `GET /api/v1/robots/<robot>` answer; CheckError naming what is wrong with it."""
     if not isinstance(document, dict):
         raise CheckError("the answer is not a JSON object")
     last_message = document.get("last_message")
-    return Robot(
+    return ReportedRobot(
         name=text_field(document, "robot"),
         up=flag_field(document, "up"),
         last_message=None if last_message is None else number_field(document, "last_message"),
@@ -48,14 +48,14 @@ def maintenance_from_document(document: object) -> Maintenance | None:
     )
 
 
-def component_from_document(document: object) -> Component:
+def component_from_document(document: object) -> ReportedComponent:
     """One entry of the answer's `components`; CheckError when its fields are missing or mistyped."""
     if not isinstance(document, dict):
         raise CheckError("a component is not a JSON object")
     level = document.get("level")
     if level not in (0, 1, 2, 3) or not isinstance(level, int) or isinstance(level, bool):
         raise CheckError(f"component level {level!r} is not 0, 1, 2 or 3")
-    return Component(
+    return ReportedComponent(
         name=text_field(document, "name"),
         hardware_id=text_field(document, "hardware_id"),
         level=level,

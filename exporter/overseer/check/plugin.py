@@ -1,19 +1,18 @@
 """check_ros_diagnostics: a Monitoring Plugins check of one robot, read from the exporter's JSON API.
 
-It starts once per check, so it imports only cheap standard modules (no argparse or getopt, not even
-__future__; a socket rather than urllib: see http_client.py) and none of the exporter; bench/bench_check.py
-measures it.
+It starts once per check, so it imports only cheap standard modules (no argparse or getopt; a socket
+rather than urllib: see `overseer.client.http`) and none of the exporter; bench/bench_check.py measures it.
 """
 
 from __future__ import annotations
 
-import os
 import sys
 
 from overseer import __version__
 from overseer.check import api_reader
 from overseer.check.document import CheckError, robot_from_document
-from overseer.check.http_client import Answer, Tls, get, parse_url, quote_path
+from overseer.client.exporter import ExporterClient, credentials, exporter_url, timeout_seconds
+from overseer.client.http import Answer, ClientError, Tls
 from overseer.verdict import CRITICAL, UNKNOWN, WARNING, Settings, clean, judge, plugin_output
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing (14 ms)
@@ -21,7 +20,7 @@ if TYPE_CHECKING:
     import re
 
 PROGRAM = "check_ros_diagnostics"
-AUTH_VARIABLE = "CHECK_ROS_DIAGNOSTICS_AUTH"
+ROBOTS_PATH = "/api/v1/robots"
 
 USAGE = f"""Usage:
  {PROGRAM} [-H <exporter host>] [-p <port>] | [--url <exporter URL>]  -r <robot>
@@ -160,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the check on `argv` (default: the command line), print its output, return the exit code."""
     try:
         state, text = outcome(sys.argv[1:] if argv is None else argv)
-    except CheckError as error:
+    except (CheckError, ClientError) as error:
         state, text = UNKNOWN, f"UNKNOWN - {clean(str(error))}"
     except Exception as error:  # a plugin never dies with a traceback: Nagios would show only its last line
         state, text = UNKNOWN, f"UNKNOWN - internal error: {type(error).__name__}: {clean(str(error))}"
@@ -247,12 +246,15 @@ def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
     ros_topic = flags.get("--ros-topic", "diagnostics_agg")
     if ros_topic not in ("diagnostics_agg", "diagnostics"):
         raise CheckError(f"invalid --ros-topic {ros_topic!r}: use diagnostics_agg or diagnostics")
+    exporter = (
+        "" if ros_master else exporter_url(*(flags.get(f, "") for f in ("--url", "--hostname", "--port")))
+    )
     return Options(
-        url="" if ros_master else exporter_url(flags),
+        url=exporter,
         robot=robot,
         settings=settings,
-        timeout=seconds(flags.get("--timeout", "10")),
-        authorization=credentials(flags),
+        timeout=timeout_seconds(flags.get("--timeout", "10")),
+        authorization=credentials(flags.get("--authorization-file", ""), flags.get("--authorization", "")),
         tls=Tls(
             ca_file=flags.get("--ca-file", ""),
             insecure="--insecure" in flags,
@@ -262,47 +264,6 @@ def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
         ros_master=ros_master,
         ros_topic=ros_topic,
     )
-
-
-def credentials(flags: dict[str, str]) -> str:
-    """`user:password` for basic auth from --authorization-file, -a or the environment; '' for none."""
-    path = flags.get("--authorization-file", "")
-    given = flags.get("--authorization", "")
-    if path and given:
-        raise CheckError("give either --authorization-file or -a/--authorization, not both")
-    if path:
-        source = f"--authorization-file {path!r}"
-        try:
-            with open(path, encoding="utf-8") as file:
-                text = file.readline().rstrip("\r\n")
-        except OSError as error:
-            raise CheckError(f"cannot read {source}: {error.strerror}") from None
-        except UnicodeDecodeError:
-            raise CheckError(f"cannot read {source}: not UTF-8 text") from None
-    elif given:
-        source, text = "-a/--authorization", given
-    else:
-        source, text = AUTH_VARIABLE, os.environ.get(AUTH_VARIABLE, "")
-    if text and ":" not in text:
-        raise CheckError(f"{source}: expected USER:PASSWORD")  # never echo what may be a password
-    return text
-
-
-def exporter_url(flags: dict[str, str]) -> str:
-    """The exporter's base URL, from --url or from -H and -p."""
-    url = flags.get("--url", "")
-    if url:
-        if "--hostname" in flags or "--port" in flags:
-            raise CheckError("give either --url or -H/-p, not both")
-        parse_url(url)
-        return url.rstrip("/")
-    host = flags.get("--hostname", "") or "127.0.0.1"
-    port = flags.get("--port", "") or "9849"
-    if not port.isdigit() or not 0 < int(port) < 65536:
-        raise CheckError(f"invalid port {port!r}: give a number from 1 to 65535")
-    if ":" in host and not host.startswith("["):
-        host = f"[{host}]"
-    return f"http://{host}:{port}"
 
 
 def compile_regex(pattern: str) -> re.Pattern[str] | None:
@@ -325,25 +286,17 @@ def stale_state(name: str) -> int:
         raise CheckError(f"invalid --stale-state {name!r}: use unknown, warning or critical") from None
 
 
-def seconds(text: str) -> float:
-    """The --timeout in seconds; CheckError unless it is a positive number."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = 0.0
-    if not 0 < value < 86400:
-        raise CheckError(f"invalid --timeout {text!r}: give seconds, more than 0 and less than a day")
-    return value
-
-
 def check(options: Options) -> tuple[int, str]:
     """Read the robot from the exporter (or straight from its ROS 1 master) and judge it."""
     settings = options.settings
     if options.ros_master:
         verdict = judge(robot_from_document(read_from_master(options)), settings)
         return verdict.state, plugin_output(verdict, settings.verbosity)
-    url = f"{options.url}/api/v1/robots/{quote_path(options.robot)}"
-    answer = get(url, options.timeout, options.authorization, options.tls)
+    client = ExporterClient(
+        options.url, options.timeout, options.authorization, options.tls, f"{PROGRAM}/{__version__}"
+    )
+    url = client.url_of(ROBOTS_PATH, options.robot)
+    answer = client.get(ROBOTS_PATH, options.robot)
     check_status(answer, url, options)
     try:
         document = api_reader.loads(answer.body)

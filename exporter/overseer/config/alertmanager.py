@@ -8,9 +8,32 @@ from dataclasses import dataclass
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import parse_duration, read_text_file, reject_unknown, string
 
-KEYS = {"url", "username", "password_file", "ca_file", "timeout", "resync_interval"}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "alertmanager.url",
+        "none: no silences",
+        "the Alertmanager to open a silence in for each maintenance window (its API v2)",
+        metavar="URL",
+    ),
+    option("alertmanager.username", "none", "basic-auth user for Alertmanager", metavar="NAME"),
+    option("alertmanager.password_file", "none", "a file whose first line is its password", metavar="PATH"),
+    option(
+        "alertmanager.ca_file", "the system's", "the CA to verify an https Alertmanager with", metavar="PATH"
+    ),
+    option(
+        "alertmanager.timeout", "10s", "how long one request to Alertmanager may take", metavar="DURATION"
+    ),
+    option(
+        "alertmanager.resync_interval",
+        "1m",
+        "how often the silences are compared with what Alertmanager holds (lost ones made again)",
+        metavar="DURATION",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 _URL = re.compile(r"https?://[^/\s?#]+(/[^\s?#]*)?")
 
 

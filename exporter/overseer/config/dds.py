@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, listed, reject_unknown, string, whole_number
 from overseer.config.topics import DIAGNOSTIC_TOPICS
 
@@ -62,7 +63,65 @@ class DdsConfig:
     max_participant_index: int = DEFAULT_MAX_PARTICIPANT_INDEX
 
 
-KEYS = {f.name for f in fields(DdsConfig)}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "dds.enabled",
+        "on",
+        "join DDS; the flag turns it off, for a fleet reached over Zenoh or ROS 1 only",
+        kind="switch",
+        flag="--dds.disabled",
+        value=False,
+    ),
+    option(
+        "dds.domains",
+        "ROS_DOMAIN_ID, else 0",
+        "a DDS domain (= ROS_DOMAIN_ID) to join; repeat for several. In the file, a domain may be "
+        "{id: 57, robot_name: robot57}: one robot, named, for its un-namespaced topics (without a name "
+        "they are robot domain<ID>, or named by their nodes' namespaces)",
+        kind="repeated",
+        metavar="ID",
+        flag="--dds.domain",
+    ),
+    option(
+        "dds.topics",
+        "diagnostics_agg, diagnostics",
+        "a diagnostics topic to follow, diagnostics_agg or diagnostics; repeat for both",
+        kind="repeated",
+        metavar="TOPIC",
+        flag="--dds.topic",
+    ),
+    option(
+        "dds.prefer_aggregated",
+        "true",
+        "read a robot that publishes both topics from diagnostics_agg only (true or false)",
+        metavar="BOOL",
+    ),
+    option(
+        "dds.loopback_only", "off", "keep DDS traffic on the loopback interface (tests, demos)", kind="switch"
+    ),
+    option(
+        "dds.cyclonedds_uri",
+        "Cyclone's own (CYCLONEDDS_URI)",
+        "Cyclone DDS configuration, XML text or file://…",
+        metavar="URI",
+    ),
+    option(
+        "dds.peers",
+        "none",
+        "send DDS discovery straight to this host, for robots on networks without multicast "
+        "(docs/networks.md); repeat for several",
+        kind="repeated",
+        metavar="HOST[:PORT]",
+        flag="--dds.peer",
+    ),
+    option(
+        "dds.max_participant_index",
+        str(DEFAULT_MAX_PARTICIPANT_INDEX),
+        "probe participant indices 0…N (one per DDS process) on each peer without a port",
+        metavar="N",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def parse_dds_peer(value: object, key: str) -> DdsPeer:
@@ -149,7 +208,7 @@ def _dds_peers(items: object, loopback_only: bool) -> tuple[DdsPeer, ...]:
 
 
 def _domain(item: object, key: str) -> DomainConfig:
-    if isinstance(item, int) and not isinstance(item, bool):
+    if isinstance(item, int | str) and not isinstance(item, bool):  # an id, or one as a flag gives it
         item = {"id": item}
     if not isinstance(item, dict):
         raise ConfigError(f"{key}: expected a domain id or a mapping with id, got {item!r}")

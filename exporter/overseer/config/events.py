@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, parse_duration, parse_size, string
 
 MIN_EVENTS_SIZE = 1_000_000
@@ -20,7 +21,24 @@ class EventsConfig:
     max_size: int = 1_000_000_000  # bytes
 
 
-KEYS = {f.name for f in fields(EventsConfig)}
+OPTIONS: tuple[Option, ...] = (
+    option("events.enabled", "true", "record the fleet's transitions (true or false)", metavar="BOOL"),
+    option(
+        "events.path",
+        "overseer-events.db",
+        "the event history's SQLite database, relative to the working directory; maintenance windows "
+        "are kept there too",
+        metavar="PATH",
+    ),
+    option("events.retention", "30d", "events older than this are deleted", metavar="DURATION"),
+    option(
+        "events.max_size",
+        "1GB",
+        "the oldest events are deleted when the database outgrows this (500MB, 1GB, 2GiB; at least 1MB)",
+        metavar="SIZE",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def events_config(raw: dict[str, Any]) -> EventsConfig:

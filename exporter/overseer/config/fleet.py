@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+import contextlib
 import re
 from dataclasses import fields
 from typing import Any
 
 from overseer.config.errors import ConfigError
-from overseer.config.parsers import listed, parse_duration, reject_unknown, string, whole_number
+from overseer.config.options import Option, file_only, option
+from overseer.config.parsers import (
+    FlagText,
+    listed,
+    parse_duration,
+    positive_integer,
+    reject_unknown,
+    string,
+    whole_number,
+)
 from overseer.model import FleetLimits
 from overseer.model.shard import Shard
 from overseer.model.state import StaleOverride
@@ -15,8 +25,75 @@ from overseer.model.state import StaleOverride
 DEFAULT_NAMESPACE_DEPTH = 1  # /robot_a/drivers/lidar is robot robot_a
 MAX_NAMESPACE_DEPTH = 32
 NAMESPACE_DEPTH_KEY = "robot_namespace_depth"
-KEYS = {f.name for f in fields(FleetLimits)} | {NAMESPACE_DEPTH_KEY}
 _DURATIONS = ("stale_after", "robot_timeout", "expire_after")
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "fleet.stale_after",
+        "5s",
+        "a component not updated for this long (or three of its producer's periods, when longer) is STALE; "
+        "5s is the ROS aggregator's and Foxglove's default",
+        metavar="DURATION",
+    ),
+    option(
+        "fleet.robot_timeout",
+        "10s",
+        "a robot silent for this long (or three of its own periods, when longer) is down; not shorter "
+        "than stale_after",
+        metavar="DURATION",
+    ),
+    option(
+        "fleet.expire_after",
+        "1h",
+        "a robot or component silent for this long is forgotten; not shorter than robot_timeout",
+        metavar="DURATION",
+    ),
+    option(
+        "fleet.stale_periods",
+        "3",
+        "a slower producer's components are STALE after this many of its learned periods (1 to 100)",
+        metavar="N",
+    ),
+    file_only(
+        "fleet.stale_overrides",
+        "none",
+        "components whose whole name matches a regular expression are STALE after exactly this long: "
+        "[{match: 'NTP offset.*', stale_after: 60s}], the first that matches",
+        "a list of mappings",
+    ),
+    option(
+        "fleet.robot_namespace_depth",
+        str(DEFAULT_NAMESPACE_DEPTH),
+        "leading segments of a node's namespace that name its robot, for un-namespaced topics "
+        "(/robot_a/drivers is robot_a; 0: the whole namespace)",
+        metavar="N",
+    ),
+    option("fleet.max_robots", "10000", "robots beyond this are dropped and counted", metavar="N"),
+    option(
+        "fleet.max_components_per_robot",
+        "1000",
+        "a robot's components beyond this are dropped and counted",
+        metavar="N",
+    ),
+    option(
+        "fleet.max_feeds_per_robot",
+        "64",
+        "publishers heard per robot; messages of more are dropped and counted",
+        metavar="N",
+    ),
+    option(
+        "fleet.max_values_per_component",
+        "64",
+        "a status's key-values beyond this are dropped and counted",
+        metavar="N",
+    ),
+    option(
+        "fleet.max_string_length",
+        "1024",
+        "longer names, messages and key-values are cut, and counted",
+        metavar="N",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def fleet_limits(raw: dict[str, Any]) -> FleetLimits:
@@ -27,10 +104,7 @@ def fleet_limits(raw: dict[str, Any]) -> FleetLimits:
             continue
         key = f"fleet.{f.name}"
         if f.name.startswith("max_"):
-            value = raw[f.name]
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
-            values[f.name] = value
+            values[f.name] = positive_integer(raw[f.name], key)
         elif f.name in _DURATIONS:
             values[f.name] = parse_duration(raw[f.name], key)
         elif f.name == "stale_periods":
@@ -78,9 +152,13 @@ def stale_overrides(value: object) -> tuple[StaleOverride, ...]:
 
 
 def _stale_periods(value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not 1 <= value <= 100:
+    number = value
+    if isinstance(value, FlagText):
+        with contextlib.suppress(ValueError):
+            number = float(value)
+    if isinstance(number, bool) or not isinstance(number, int | float) or not 1 <= number <= 100:
         raise ConfigError(f"fleet.stale_periods: expected a number from 1 to 100, got {value!r}")
-    return float(value)
+    return float(number)
 
 
 def parse_shard(value: object, key: str = "shard") -> Shard:

@@ -12,25 +12,56 @@ from dataclasses import dataclass
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import parse_duration, read_text_file
 
 SERVICE_KINDS = ("robot", "groups")
-KEYS = {
-    "url",
-    "username",
-    "password_file",
-    "ca_file",
-    "tls_server_name",
-    "client_cert",
-    "client_key",
-    "interval",
-    "services",
-    "host_template",
-    "service_template",
-    "zone",
-    "exporter_id",
-    "timeout",
-}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "icinga2.url",
+        "none: no push",
+        "push robots and results to this Icinga 2 API, e.g. https://icinga.example:5665",
+        metavar="URL",
+    ),
+    option("icinga2.username", "none", "the Icinga 2 ApiUser", metavar="NAME"),
+    option(
+        "icinga2.password_file", "none", "a file whose first line is the ApiUser's password", metavar="PATH"
+    ),
+    option("icinga2.ca_file", "required", "the CA certificate of the Icinga 2 API", metavar="PATH"),
+    option(
+        "icinga2.tls_server_name",
+        "the URL's host",
+        "the name in the Icinga 2 API's certificate, when not the URL's host",
+        metavar="NAME",
+    ),
+    option("icinga2.client_cert", "none", "a client certificate instead of a password", metavar="PATH"),
+    option("icinga2.client_key", "none", "the client certificate's key", metavar="PATH"),
+    option(
+        "icinga2.interval",
+        "60s",
+        "push every robot's results this often, and at once on a change; Icinga trusts a result for two",
+        metavar="DURATION",
+    ),
+    option("icinga2.timeout", "10s", "how long one request to Icinga 2 may take", metavar="DURATION"),
+    option(
+        "icinga2.services",
+        "robot, groups",
+        "a kind of service to push: robot (one per robot) or groups (one per component group); repeat",
+        kind="repeated",
+        metavar="KIND",
+        flag="--icinga2.service",
+    ),
+    option("icinga2.host_template", "none", "a host template the robots' hosts import", metavar="NAME"),
+    option("icinga2.service_template", "none", "a service template the services import", metavar="NAME"),
+    option("icinga2.zone", "none", "the zone the hosts and services are made in", metavar="ZONE"),
+    option(
+        "icinga2.exporter_id",
+        "overseer",
+        "the mark on the objects this exporter makes (vars.overseer_exporter): two exporters, two ids",
+        metavar="ID",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 _URL = re.compile(r"https://(\[[0-9A-Fa-f:.]+\]|[^/\s:\[\]]+)(?::(\d{1,5}))?/?")
 
 

@@ -7,10 +7,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 
 MAX_INGEST_WORKERS = 64
 DEFAULT_INGEST_WORKERS_CAP = 16
-KEYS = {"workers"}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "ingest.workers",
+        f"one per core, at most {DEFAULT_INGEST_WORKERS_CAP}",
+        "worker processes sharing the ingest, each following the robots whose name hashes to it "
+        f"(1 to {MAX_INGEST_WORKERS}); one /metrics, API and check endpoint serve them all; 1 ingests in the "
+        "exporter's own process",
+        metavar="N",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def default_ingest_workers() -> int:

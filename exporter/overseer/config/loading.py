@@ -36,6 +36,7 @@ from overseer.config.icinga2 import Icinga2Config
 from overseer.config.ingest import IngestConfig
 from overseer.config.maintenance import MaintenanceConfig
 from overseer.config.metrics import MetricsConfig
+from overseer.config.options import Option, option
 from overseer.config.parsers import first_line, reject_unknown, section, string
 from overseer.config.ros1 import Ros1Config
 from overseer.config.ros2 import Ros2Config
@@ -49,6 +50,38 @@ LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
 _SECTIONS = {"web", "dds", "ros1", "zenoh", "ros2", "fleet", "metrics", "ingest", "events", "maintenance"}
 _TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2", "alertmanager"}
+TOP_LEVEL_OPTIONS: tuple[Option, ...] = (
+    option(
+        "shard",
+        "0/1",
+        "follow only the robots whose name hashes (CRC-32) to shard I of N (several exporters share a fleet)",
+        metavar="I/N",
+    ),
+    option("log_level", "info", "debug, info, warning or error", metavar="LEVEL", flag="--log.level"),
+    option(
+        "log_format",
+        "text",
+        "text, or json: one JSON object a line (time, level, logger, message), every recorded event too",
+        metavar="FORMAT",
+        flag="--log.format",
+    ),
+)
+# Every key of the configuration, in the order `--help` and the reference show them.
+ALL_OPTIONS: tuple[Option, ...] = (
+    *web.OPTIONS,
+    *dds.OPTIONS,
+    *ros2.OPTIONS,
+    *zenoh.OPTIONS,
+    *ros1.OPTIONS,
+    *fleet.OPTIONS,
+    *TOP_LEVEL_OPTIONS,
+    *ingest.OPTIONS,
+    *metrics.OPTIONS,
+    *events.OPTIONS,
+    *maintenance.OPTIONS,
+    *icinga2.OPTIONS,
+    *alertmanager.OPTIONS,
+)
 
 
 @dataclass(frozen=True)

@@ -9,10 +9,28 @@ from typing import Any
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, file_only, option
 from overseer.config.parsers import listed, reject_unknown, string
 from overseer.model.maintenance import DAYS, RecurringWindow, RobotSelector
 
-KEYS = {"writers", "windows"}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "maintenance.writers",
+        "none",
+        "a basic-auth user (of the web config) who may open and end windows; repeat for several",
+        kind="repeated",
+        metavar="USER",
+        flag="--maintenance.writer",
+    ),
+    file_only(
+        "maintenance.windows",
+        "none",
+        "recurring windows: [{robots: night_shift/, from: '22:00', to: '06:00', days: [mon, tue], "
+        "time_zone: Europe/Berlin, comment: parked}]",
+        "a list of mappings",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 _WINDOW_KEYS = {"robots", "days", "from", "to", "time_zone", "comment"}
 _TIME = re.compile(r"([01]\d|2[0-3]):([0-5]\d)")
 

@@ -7,11 +7,40 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, listed, string, whole_number
 
 MESSAGE_LABEL_MODES = ("none", "problems", "all")
 DEFAULT_MESSAGE_LABEL_LENGTH = 100
-KEYS = {"value_keys", "message_labels", "message_label_length", "level_changes"}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "metrics.value_keys",
+        ".*",
+        "a regular expression (full match) of the key-value keys exported as numbers; repeat for several",
+        kind="repeated",
+        metavar="REGEX",
+        flag="--metrics.value-key",
+    ),
+    option(
+        "metrics.message_labels",
+        "problems",
+        "which components get ros_diagnostics_status_message: none, problems (reported not OK), all",
+        metavar="MODE",
+    ),
+    option(
+        "metrics.message_label_length",
+        str(DEFAULT_MESSAGE_LABEL_LENGTH),
+        "characters of the status-message label (1-1024), … included when cut",
+        metavar="N",
+    ),
+    option(
+        "metrics.level_changes",
+        "true",
+        "export ros_diagnostics_level_changes_total, a series per component (true or false)",
+        metavar="BOOL",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 @dataclass(frozen=True)

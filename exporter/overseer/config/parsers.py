@@ -26,6 +26,20 @@ _SIZE_UNITS = {
 }
 
 
+class FlagText(str):
+    """A value as typed after a flag: the readers take the number or boolean it spells, as YAML would.
+
+    A file's quoted `"8"` stays a string and an error, so the file means what its YAML types say.
+    """
+
+
+def _flag_number(value: object) -> object:
+    """An integer for a flag's decimal text, else `value` as it is."""
+    if isinstance(value, FlagText) and value.strip().isdigit() and len(value) < 20:
+        return int(value)
+    return value
+
+
 def parse_duration(value: object, key: str) -> float:
     """Seconds from a number or a Prometheus-style duration such as `5s`, `1h30m`, `250ms`."""
     if isinstance(value, bool):
@@ -76,11 +90,13 @@ def string(value: object, key: str) -> str:
     """`value` when it is a non-empty string."""
     if not isinstance(value, str) or not value:
         raise ConfigError(f"{key}: expected a non-empty string, got {value!r}")
-    return value
+    return str(value)  # a flag's FlagText as the plain string it is
 
 
 def boolean(value: object, key: str) -> bool:
-    """`value` when it is true or false."""
+    """`value` when it is true or false (a flag's text `true` or `false` too)."""
+    if isinstance(value, FlagText) and value.lower() in ("true", "false"):
+        return value.lower() == "true"
     if not isinstance(value, bool):
         raise ConfigError(f"{key}: expected true or false, got {value!r}")
     return value
@@ -93,11 +109,20 @@ def listed(value: object, key: str) -> list[Any]:
     return value
 
 
+def positive_integer(value: object, key: str) -> int:
+    """`value` when it is a positive integer (not a bool; a flag's decimal text too)."""
+    number = _flag_number(value)
+    if not isinstance(number, int) or isinstance(number, bool) or number < 1:
+        raise ConfigError(f"{key}: expected a positive integer, got {value!r}")
+    return number
+
+
 def whole_number(value: object, key: str, low: int, high: int, what: str = "an integer") -> int:
-    """`value` when it is an integer from `low` to `high` (not a bool)."""
-    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high:
+    """`value` when it is an integer from `low` to `high` (not a bool; a flag's decimal text too)."""
+    number = _flag_number(value)
+    if not isinstance(number, int) or isinstance(number, bool) or not low <= number <= high:
         raise ConfigError(f"{key}: expected {what} from {low} to {high}, got {value!r}")
-    return value
+    return number
 
 
 def read_text_file(path: str | Path, key: str) -> str:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Flag, Option, option
 from overseer.config.parsers import listed, parse_duration, reject_unknown, string
 from overseer.config.topics import DIAGNOSTIC_TOPICS
 from overseer.ros_master import master_host
@@ -38,7 +39,69 @@ class Ros1Config:
         return bool(self.robots)
 
 
-KEYS = {f.name for f in fields(Ros1Config)}
+def robots_from_flags(given: dict[str, Any]) -> list[dict[str, str]]:
+    """ros1.robots from `--ros1.robot NAME=URI` and `--ros-master URI`; a bare NAME names the one master."""
+    named, masters = given.get("--ros1.robot", []), given.get("--ros-master", [])
+    robots = []
+    names_for_master = []
+    for text in named:
+        name, sep, uri = text.partition("=")
+        if sep:
+            robots.append({"name": name, "master_uri": uri})
+        elif len(masters) == 1 and name:
+            names_for_master.append(name)
+        else:
+            raise ConfigError(
+                "--ros1.robot: expected NAME=MASTER_URI (or NAME with exactly one --ros-master), "
+                f"got {text!r}"
+            )
+    if len(names_for_master) > 1:
+        raise ConfigError(f"--ros1.robot: one name for the one --ros-master, got {names_for_master}")
+    for uri in masters:
+        robots.append({"master_uri": uri, **({"name": names_for_master[0]} if names_for_master else {})})
+    return robots
+
+
+OPTIONS: tuple[Option, ...] = (
+    Option(
+        "ros1.robots",
+        "none",
+        "ROS 1 robots by their masters. --ros1.robot NAME=MASTER_URI names one "
+        "(robot1=http://10.0.0.5:11311); --ros-master URL takes one named after its master's host "
+        "(http://10.0.0.5:11311 is robot 10.0.0.5), and with one --ros-master a bare --ros1.robot NAME "
+        "names it; both repeat. In the file: {name, master_uri, topic: diagnostics_agg or diagnostics}",
+        (Flag("--ros1.robot", "repeated", "NAME=MASTER_URI"), Flag("--ros-master", "repeated", "URL")),
+        from_flags=robots_from_flags,
+    ),
+    option(
+        "ros1.caller_id", "/overseer", "the caller id the exporter registers with each master", metavar="ID"
+    ),
+    option(
+        "ros1.advertise_host",
+        "the address that reaches each master",
+        "the host name or address publishers connect back to (the exporter's, as robots reach it)",
+        metavar="HOST",
+    ),
+    option(
+        "ros1.reconnect_min",
+        "0.5s",
+        "the first wait before reaching a master or publisher again",
+        metavar="DURATION",
+    ),
+    option(
+        "ros1.reconnect_max",
+        "30s",
+        "the longest wait between tries, doubling from reconnect_min",
+        metavar="DURATION",
+    ),
+    option(
+        "ros1.poll_interval",
+        "5s",
+        "how often each master is asked for the topic's publishers",
+        metavar="DURATION",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def ros1_config(raw: dict[str, Any]) -> Ros1Config:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, listed, parse_duration, string, whole_number
 from overseer.config.topics import DIAGNOSTIC_TOPICS
 
@@ -36,7 +37,48 @@ class Ros2Config:
         return self.robot_name or f"domain{self.domain}"
 
 
-KEYS = {f.name for f in fields(Ros2Config)}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "ros2.enabled",
+        "off",
+        "join the robots' ROS 2 graph as a node through rclpy (pip install overseer[ros2]); any ros2 key "
+        "turns it on, and the DDS source is then off unless the configuration turns it on",
+        kind="switch",
+        flag="--ros2",
+    ),
+    option("ros2.node_name", "overseer", "the exporter's node name", metavar="NAME"),
+    option("ros2.domain", "ROS_DOMAIN_ID, else 0", "the ROS domain to join", metavar="ID"),
+    option(
+        "ros2.topics",
+        "diagnostics_agg, diagnostics",
+        "a diagnostics topic to follow; repeat for both",
+        kind="repeated",
+        metavar="TOPIC",
+        flag="--ros2.topic",
+    ),
+    option(
+        "ros2.prefer_aggregated",
+        "true",
+        "read a robot that publishes both topics from diagnostics_agg only (true or false)",
+        metavar="BOOL",
+    ),
+    option(
+        "ros2.robot_name",
+        "domain<ID>: robots by their nodes' namespaces",
+        "name the domain's one robot: every un-namespaced topic is it, whatever its nodes' namespaces",
+        metavar="NAME",
+    ),
+    option(
+        "ros2.fleet_topic",
+        DEFAULT_FLEET_TOPIC,
+        "where the fleet's own DiagnosticArray is published, a status per robot (null in the file: nowhere)",
+        metavar="TOPIC",
+    ),
+    option(
+        "ros2.fleet_period", "1s", "how often the fleet's DiagnosticArray is published", metavar="DURATION"
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def ros2_config(raw: dict[str, Any]) -> Ros2Config:

@@ -7,10 +7,39 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, string
 
 DEFAULT_PORT = 9849
-KEYS = {"listen_address", "config_file", "external_url", "enable_maintenance_api"}
+OPTIONS: tuple[Option, ...] = (
+    option(
+        "web.listen_address",
+        f":{DEFAULT_PORT}",
+        f"where to serve, HOST:PORT; :{DEFAULT_PORT} is every interface",
+        metavar="HOST:PORT",
+    ),
+    option(
+        "web.config_file",
+        "none: plain HTTP",
+        "TLS, client certificates and basic auth, in the format of Prometheus' exporter-toolkit",
+        metavar="PATH",
+        flag="--web.config.file",
+    ),
+    option(
+        "web.external_url",
+        "none: alerts link to http://<instance>",
+        "the URL users reach the exporter at, for the status-page links in alerts (overseer_web_info)",
+        metavar="URL",
+    ),
+    option(
+        "web.enable_maintenance_api",
+        "off",
+        "let the users of maintenance.writers open and end maintenance windows (POST, DELETE "
+        "/api/v1/maintenance); reading is always on",
+        kind="switch",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 @dataclass(frozen=True)

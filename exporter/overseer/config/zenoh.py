@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from overseer.config.errors import ConfigError
+from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, listed, string, whole_number
 
 ZENOH_MODES = ("client", "peer")
@@ -35,7 +36,65 @@ class ZenohConfig:
         return self.robot_name or f"domain{self.domain}"
 
 
-KEYS = {f.name for f in fields(ZenohConfig)}
+OPTIONS: tuple[Option, ...] = (
+    Option(
+        "zenoh.enabled",
+        "off; any zenoh key or flag turns it on",
+        "follow robots over Zenoh (false in the file keeps the section but off)",
+        file_only="any --zenoh.* flag turns Zenoh on",
+    ),
+    option(
+        "zenoh.mode",
+        "client with one connect, peer with several",
+        "the exporter's Zenoh session mode, client or peer (a client keeps a link to one router only; a "
+        "peer holds one to each site's router)",
+        metavar="MODE",
+    ),
+    option(
+        "zenoh.connect",
+        "none",
+        "a Zenoh router (or peer) to connect to, e.g. tcp/router.example:7447; repeat for several",
+        kind="repeated",
+        metavar="ENDPOINT",
+    ),
+    option(
+        "zenoh.listen",
+        "none",
+        "a Zenoh endpoint to listen on (robots connect to the exporter), e.g. tcp/0.0.0.0:7447; repeatable",
+        kind="repeated",
+        metavar="ENDPOINT",
+    ),
+    option(
+        "zenoh.domain", "0", "the ROS domain of the rmw_zenoh keys (ROS_DOMAIN_ID of the robots)", metavar="N"
+    ),
+    option(
+        "zenoh.config",
+        "none",
+        "a native Zenoh JSON5 configuration (TLS, mTLS, access control, anything else of Zenoh's)",
+        metavar="FILE",
+    ),
+    option(
+        "zenoh.key_formats",
+        "rmw_zenoh, bridge",
+        "a key format to follow: rmw_zenoh's keys, or zenoh-bridge-ros2dds's (bridge); repeat for both",
+        kind="repeated",
+        metavar="FORMAT",
+        flag="--zenoh.key-format",
+    ),
+    option(
+        "zenoh.robot_name",
+        "domain<ID>: robots by their nodes' namespaces",
+        "name the one robot of un-namespaced topics, whatever its nodes' namespaces",
+        metavar="NAME",
+    ),
+    option(
+        "zenoh.multicast_scouting",
+        "false",
+        "find routers and peers by multicast scouting too (true or false)",
+        metavar="BOOL",
+    ),
+)
+KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
 def zenoh_config(raw: dict[str, Any]) -> ZenohConfig:

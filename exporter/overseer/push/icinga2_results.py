@@ -19,9 +19,9 @@ from overseer.push.icinga2_names import (
     host_name,
 )
 from overseer.verdict import (
-    Component,
     Maintenance,
-    Robot,
+    ReportedComponent,
+    ReportedRobot,
     Settings,
     Verdict,
     down_text,
@@ -90,11 +90,13 @@ def robot_results(
     return results
 
 
-def judged_robot(snapshot: FleetSnapshot, robot: RobotState, maintenance: Maintenance | None = None) -> Robot:
+def judged_robot(
+    snapshot: FleetSnapshot, robot: RobotState, maintenance: Maintenance | None = None
+) -> ReportedRobot:
     """The robot as the verdict reads it: what `GET /api/v1/robots/<robot>` shows of it, now."""
     up = snapshot.robot_up(robot)
     components = [
-        Component(
+        ReportedComponent(
             component.name,
             component.hardware_id,
             int(snapshot.component_level(robot, key, component, up)),
@@ -103,7 +105,7 @@ def judged_robot(snapshot: FleetSnapshot, robot: RobotState, maintenance: Mainte
         )
         for key, component in sorted(robot.components.items())
     ]
-    return Robot(
+    return ReportedRobot(
         robot.name,
         up,
         robot.last_message_wall,

@@ -26,10 +26,10 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
+from overseer.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.api_query import ComponentQueryError, parse_component_query
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
-from overseer.serve.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.status_page import FAVICON, PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 

@@ -16,7 +16,7 @@ from urllib.parse import urlsplit
 from overseer.maintenance.requests import parse_window_request
 from overseer.maintenance.schedule import MaintenanceSchedule, WindowError
 from overseer.maintenance.store import StoreUnavailable
-from overseer.serve.routes import ApiRequest
+from overseer.routes import ApiRequest
 
 MAINTENANCE_PATH = "/api/v1/maintenance"
 _SAME_SITE = ("same-origin", "none")

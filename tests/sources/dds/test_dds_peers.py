@@ -146,9 +146,18 @@ def test_loopback_peers_go_with_loopback_only() -> None:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["run", "--dds.peer=10.0.0.5", "--dds.peer=robot:99999"], "dds.peers[1]: expected a port from 1"),
-        (["run", "--dds.max-participant-index=0"], "dds.max_participant_index: expected an integer from 1"),
-        (["run", "--dds.loopback-only", "--dds.peer=10.0.0.5"], "dds.peers[0]: '10.0.0.5' is not a loopback"),
+        (
+            ["run", "--dds.peer=10.0.0.5", "--dds.peer=robot:99999"],
+            "--dds.peer (dds.peers[1]): expected a port from 1",
+        ),
+        (
+            ["run", "--dds.max-participant-index=0"],
+            "--dds.max-participant-index (dds.max_participant_index): expected an integer from 1",
+        ),
+        (
+            ["run", "--dds.loopback-only", "--dds.peer=10.0.0.5"],
+            "--dds.peer (dds.peers[0]): '10.0.0.5' is not a loopback",
+        ),
         (["simulate", "--dds.peer=robot:0"], "--dds.peer: expected a port from 1 to 65535 after the host"),
         (["simulate", "--dds.loopback-only", "--dds.peer=10.0.0.5"], "--dds.peer: only loopback peers go"),
     ],

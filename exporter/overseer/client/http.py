@@ -1,20 +1,23 @@
-"""The check's HTTP client: one GET over a plain socket, with TLS and basic auth when asked.
+"""HTTP for the exporter's API: one request over a plain socket, with TLS and basic auth when asked.
 
 `urllib.request` and `http.client` import the email package and ssl, which alone take longer than
-starting Python; the exporter's API needs one GET and a body, so HTTP/1.0 over a socket does it (an
-HTTP/1.0 request gets neither chunked encoding nor keep-alive). Even `socket.py` costs a sixth of
-Python's start-up in enums and selectors, so plain http uses the `_socket` C module it wraps;
-`socket`, `ssl` and `binascii` are imported only when https or credentials need them. Credentials
-come from a file or the environment (see check.py); they are sent, never printed.
+starting Python, and `check_ros_diagnostics` starts once per check; the exporter's API needs one request
+and a body, so HTTP/1.0 over a socket does it (an HTTP/1.0 request gets neither chunked encoding nor
+keep-alive). Even `socket.py` costs a sixth of Python's start-up in enums and selectors, so plain http
+uses the `_socket` C module it wraps; `socket`, `ssl` and `binascii` are imported only when https or
+credentials need them. Credentials are sent, never printed. Every failure is a `ClientError`.
 """
 
 import _socket
 import time
 
-from overseer import __version__
-from overseer.check.document import CheckError
-
 _MAX_ANSWER_BYTES = 64 * 1024 * 1024
+
+
+class ClientError(Exception):
+    """The exporter could not be asked, or did not answer as its API does; the text says why."""
+
+
 _UNRESERVED = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-._~/")
 
 
@@ -64,19 +67,19 @@ class Url:
 
 
 def parse_url(url: str) -> Url:
-    """Split `scheme://host[:port][/path]`; CheckError when it is not an http(s) URL without credentials."""
+    """Split `scheme://host[:port][/path]`; ClientError when it is not an http(s) URL without credentials."""
     scheme, separator, rest = url.partition("://")
     scheme = scheme.lower()
     if not separator or scheme not in ("http", "https"):
-        raise CheckError(f"invalid URL {url!r}: it must start with http:// or https://")
+        raise ClientError(f"invalid URL {url!r}: it must start with http:// or https://")
     authority, slash, path = rest.partition("/")
     if "@" in authority:
-        raise CheckError("invalid URL: give credentials with -a/--authorization, not in the URL")
+        raise ClientError("invalid URL: give credentials with -a/--authorization, not in the URL")
     host, port_text = split_host_port(authority, "443" if scheme == "https" else "80")
     if not host:
-        raise CheckError(f"invalid URL {url!r}: no host")
+        raise ClientError(f"invalid URL {url!r}: no host")
     if not port_text.isdigit() or not 0 < int(port_text) < 65536:
-        raise CheckError(f"invalid URL {url!r}: bad port {port_text!r}")
+        raise ClientError(f"invalid URL {url!r}: bad port {port_text!r}")
     return Url(scheme == "https", host, int(port_text), slash + path or "/")
 
 
@@ -94,17 +97,18 @@ def quote_path(text: str) -> str:
     return "".join(chr(byte) if byte in _UNRESERVED else f"%{byte:02X}" for byte in text.encode("utf-8"))
 
 
-def get(
+def request(
+    method: str,
     url: str,
     timeout: float,
     authorization: str = "",
     tls: Tls | None = None,
-    method: str = "GET",
     body: bytes | None = None,
+    user_agent: str = "overseer",
 ) -> Answer:
-    """GET `url` (or send `method` with a JSON `body`) within `timeout` seconds in all.
+    """Send `method` (with a JSON `body`) to `url` and read the answer, within `timeout` seconds in all.
 
-    CheckError naming the URL when no HTTP answer comes back. The deadline bounds connecting, sending and
+    ClientError naming the URL when no HTTP answer comes back. The deadline bounds connecting, sending and
     every read; only a DNS lookup that hangs can outlast it.
     """
     target = parse_url(url)
@@ -112,20 +116,20 @@ def get(
     try:
         stream = connect(target, deadline, tls or Tls())
         try:
-            stream.sendall(request_bytes(target, authorization, method, body))
+            stream.sendall(request_bytes(target, authorization, method, body, user_agent))
             return parse_answer(read_all(stream, deadline), url)
         finally:
             stream.close()
     except _socket.gaierror as error:
-        raise CheckError(f"cannot resolve {target.host!r}: {error.strerror}") from None
+        raise ClientError(f"cannot resolve {target.host!r}: {error.strerror}") from None
     except TimeoutError:
-        raise CheckError(f"timeout: no complete answer from {url} within {timeout:g} s") from None
+        raise ClientError(f"timeout: no complete answer from {url} within {timeout:g} s") from None
     except ConnectionRefusedError:
-        raise CheckError(f"exporter unreachable at {url}: connection refused") from None
+        raise ClientError(f"exporter unreachable at {url}: connection refused") from None
     except OSError as error:
         if target.tls and type(error).__module__ == "ssl":  # ssl is imported when it can have raised
-            raise CheckError(f"TLS error with {url}: {tls_reason(error)}") from None
-        raise CheckError(f"exporter unreachable at {url}: {error.strerror or error}") from None
+            raise ClientError(f"TLS error with {url}: {tls_reason(error)}") from None
+        raise ClientError(f"exporter unreachable at {url}: {error.strerror or error}") from None
 
 
 def remaining(deadline: float) -> float:
@@ -171,12 +175,12 @@ def wrap_tls(sock: _socket.socket, host: str, deadline: float, tls: Tls) -> _soc
     try:
         context = ssl.create_default_context(cafile=tls.ca_file or None)
     except OSError as error:
-        raise CheckError(f"cannot use --ca-file {tls.ca_file!r}: {file_error(error)}") from None
+        raise ClientError(f"cannot use --ca-file {tls.ca_file!r}: {file_error(error)}") from None
     if tls.client_cert:
         try:
             context.load_cert_chain(tls.client_cert, tls.client_key or None)
         except OSError as error:
-            raise CheckError(f"cannot use --client-cert {tls.client_cert!r}: {file_error(error)}") from None
+            raise ClientError(f"cannot use --client-cert {tls.client_cert!r}: {file_error(error)}") from None
     if tls.insecure:
         context.check_hostname = False
         context.verify_mode = ssl.CERT_NONE
@@ -190,7 +194,13 @@ def file_error(error: OSError) -> str:
     return error.strerror or str(getattr(error, "reason", "") or error)
 
 
-def request_bytes(target: Url, credentials: str, method: str = "GET", body: bytes | None = None) -> bytes:
+def request_bytes(
+    target: Url,
+    credentials: str,
+    method: str = "GET",
+    body: bytes | None = None,
+    user_agent: str = "overseer",
+) -> bytes:
     """The HTTP/1.0 request for `target`, with basic auth when `credentials` is `user:password`.
 
     A `body` goes as JSON (`Content-Type: application/json`).
@@ -199,7 +209,7 @@ def request_bytes(target: Url, credentials: str, method: str = "GET", body: byte
         f"{method} {target.path} HTTP/1.0",
         f"Host: {target.authority()}",
         "Accept: application/json",
-        f"User-Agent: check_ros_diagnostics/{__version__}",
+        f"User-Agent: {user_agent}",
     ]
     if credentials:
         import binascii  # only basic auth pays for it
@@ -222,23 +232,23 @@ def read_all(stream: _socket.socket, deadline: float) -> bytes:
             break
         size += len(chunk)
         if size > _MAX_ANSWER_BYTES:
-            raise CheckError(f"answer larger than {_MAX_ANSWER_BYTES // (1024 * 1024)} MiB")
+            raise ClientError(f"answer larger than {_MAX_ANSWER_BYTES // (1024 * 1024)} MiB")
         chunks.append(chunk)
     return b"".join(chunks)
 
 
 def parse_answer(raw: bytes, url: str) -> Answer:
-    """Status line, headers and body of a raw HTTP answer; CheckError when it is not one."""
+    """Status line, headers and body of a raw HTTP answer; ClientError when it is not one."""
     head, separator, body = raw.partition(b"\r\n\r\n")
     lines = head.decode("iso-8859-1").split("\r\n")
     version, _, status = lines[0].partition(" ")
     code, _, reason = status.partition(" ")
     if not separator or not version.startswith("HTTP/") or not code.isdigit():
-        raise CheckError(f"no HTTP answer from {url}")
+        raise ClientError(f"no HTTP answer from {url}")
     length = header(lines[1:], "content-length")
     if length.isdigit():
         if len(body) < int(length):
-            raise CheckError(f"answer from {url} cut short: {len(body)} of {length} bytes")
+            raise ClientError(f"answer from {url} cut short: {len(body)} of {length} bytes")
         body = body[: int(length)]
     return Answer(int(code), reason.strip(), body)
 

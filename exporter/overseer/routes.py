@@ -1,4 +1,8 @@
-"""What a JSON route of the endpoint is given and gives: the request as a route needs it, and its answer."""
+"""The one route type of the exporter's JSON API: the request as a route needs it, and its answer.
+
+The HTTP endpoint (`serve/`) answers the fleet's paths itself and hands other outputs' paths (the event
+history's, the maintenance windows') to the routes they give it, all of this one type.
+"""
 
 from __future__ import annotations
 
@@ -23,3 +27,8 @@ class ApiRequest:
 
 # A JSON path the endpoint serves for another output: its status and document for a request.
 JsonRoute = Callable[[ApiRequest], tuple[int, dict[str, Any]]]
+
+
+def method_not_allowed(request: ApiRequest, path: str, allowed: str) -> tuple[int, dict[str, Any]]:
+    """The 405 answer to a method a route does not answer."""
+    return 405, {"error": f"{request.method} is not answered at {path}; {allowed} it"}
