@@ -11,9 +11,12 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 from overseer.levels import Level
+
+if TYPE_CHECKING:
+    from overseer.model.inventory import ListedRobot
 
 # (name, discriminator): the discriminator is '' for every component but the statuses of one name that a
 # robot reports side by side with different hardware_ids in one array (a genuine clash): those are kept
@@ -38,7 +41,7 @@ class FleetLimits:
 
     stale_after: float = 5.0
     robot_timeout: float = 10.0
-    expire_after: float = 3600.0
+    expire_after: float = 7 * 86400.0  # a week: a robot dead on Friday evening is still down on Monday
     max_robots: int = 10_000
     max_components_per_robot: int = 1_000
     max_values_per_component: int = 64
@@ -95,6 +98,24 @@ class Feed(NamedTuple):
     intervals: tuple[float, ...] = ()
 
 
+ForgetReason = Literal["expired", "retired", "unlisted"]
+
+
+class Forgetting(NamedTuple):
+    """Why a robot was forgotten, and when (unix time)."""
+
+    reason: ForgetReason
+    at: float
+
+
+class RememberedRobot(NamedTuple):
+    """A robot heard before this start: its name, its transport, when it was last heard (unix time)."""
+
+    name: str
+    transport: str
+    heard_at: float
+
+
 @dataclass(frozen=True, slots=True)
 class RobotState:
     """One robot as last seen; replaced whole, never mutated.
@@ -103,7 +124,8 @@ class RobotState:
     applies); it is empty for almost every robot, so it is shared. `left_at` is when a transport that
     tracks publishers (DDS discovery, Zenoh liveliness, the ROS graph) saw the robot's last diagnostics
     publisher go: the robot is down from then until a message arrives after it. `revision` changes with
-    anything a judgement or a rendering of the robot depends on but the feeds' times.
+    anything a judgement or a rendering of the robot depends on but the feeds' times. `listing` is its
+    entry in the inventory (labels, expected components), None for a robot known only by discovery.
     """
 
     name: str
@@ -117,6 +139,7 @@ class RobotState:
     left_at: float | None = None
     wall_offset: float = 0.0  # wall clock minus monotonic clock, at the last message (or discovery)
     up_since: float = 0.0  # the first message since it was last down (silent, or its publisher gone)
+    listing: ListedRobot | None = None
 
     @property
     def last_seen(self) -> float:
