@@ -20,7 +20,7 @@ from overseer.model import (
     RobotState,
 )
 from overseer.model.events import Event
-from overseer.model.inventory import NEVER_REPORTED, is_stand_in
+from overseer.model.inventory import UNREPORTED, is_stand_in
 from overseer.model.transitions import TransitionDetector
 
 START = 1_700_000_000.0
@@ -82,7 +82,7 @@ def test_a_listed_robot_never_heard_is_down_with_its_expected_components_stale()
     snapshot, robot = fleet.robot("r1")
     assert (snapshot.robot_up(robot), robot.last_message, robot.listing) == (False, None, TB4)
     assert fleet.components("r1") == {
-        "/Power/Battery": (Level.STALE, NEVER_REPORTED),
+        "/Power/Battery": (Level.STALE, UNREPORTED),
         "/Wheels/*": (Level.STALE, "expected at least 4 components matching /Wheels/*, none reported"),
         "cam_[0-9]: Rate": (
             Level.STALE,

@@ -9,7 +9,6 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 import yaml
@@ -88,7 +87,7 @@ def _inventory(loaded: object) -> Inventory:
     robots = {}
     for name, entry in _mapping(raw.get("robots") or {}, "robots").items():
         robots[_name(name, "robots")] = _robot(entry, f"robots.{_shown(name)}", models)
-    return Inventory(MappingProxyType(robots))
+    return Inventory(robots)
 
 
 class _Model:

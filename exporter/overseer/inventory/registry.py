@@ -24,7 +24,8 @@ _SCHEMA = """
 CREATE TABLE IF NOT EXISTS robots_heard (
     robot TEXT PRIMARY KEY,
     transport TEXT NOT NULL,
-    heard_at REAL NOT NULL     -- unix time of its last message
+    heard_at REAL NOT NULL,    -- unix time of its last message
+    down INTEGER NOT NULL      -- 1 when it was down then
 ) WITHOUT ROWID;
 """
 
@@ -50,15 +51,20 @@ class RobotRegistry:
             if connection is None:
                 return []
             try:
-                rows = connection.execute("SELECT robot, transport, heard_at FROM robots_heard").fetchall()
+                rows = connection.execute(
+                    "SELECT robot, transport, heard_at, down FROM robots_heard"
+                ).fetchall()
             except sqlite3.Error as error:
                 self._failed("read", error)
                 return []
-        return [RememberedRobot(str(name), str(transport), float(at)) for name, transport, at in rows]
+        return [
+            RememberedRobot(str(name), str(transport), float(at), bool(down))
+            for name, transport, at, down in rows
+        ]
 
     def save(self, robots: Iterable[RememberedRobot]) -> bool:
         """Make the table hold exactly `robots`; False when it cannot be written (logged)."""
-        rows = [(robot.name, robot.transport, robot.heard_at) for robot in robots]
+        rows = [(robot.name, robot.transport, robot.heard_at, int(robot.down)) for robot in robots]
         with self._lock:
             if not rows and not Path(self.path).exists():
                 return True  # nothing to remember: the file is made with the first robot, not before
@@ -68,7 +74,7 @@ class RobotRegistry:
             try:
                 with connection:
                     connection.execute("DELETE FROM robots_heard")
-                    connection.executemany("INSERT INTO robots_heard VALUES (?, ?, ?)", rows)
+                    connection.executemany("INSERT INTO robots_heard VALUES (?, ?, ?, ?)", rows)
             except sqlite3.Error as error:
                 self._failed("write", error)
                 return False

@@ -415,7 +415,7 @@ class FleetModel:
         """Robots heard before this start: each silent since it was last heard, until it speaks again."""
         now, wall = self._clock(), self._wall_clock()
         with self._lock:
-            for name, transport, heard_at in robots:
+            for name, transport, heard_at, down in robots:
                 state = self._robots.get(name)
                 if state is not None and state.last_message is not None:
                     continue  # heard already in this run
@@ -431,16 +431,24 @@ class FleetModel:
                     last,
                     MappingProxyType(components),
                     last,
+                    left_at=last if down else None,  # down until a message arrives after it
                     wall_offset=wall - now,
                     up_since=last,
                     listing=listing,
                 )
 
     def heard(self) -> list[RememberedRobot]:
-        """Every robot heard, in this run or before it, and when it was last heard (unix time)."""
+        """Every robot heard, in this run or before it: when it was last heard (unix time), if down now."""
+        now = self._clock()
+        limits = self.limits
         with self._lock:
             return [
-                RememberedRobot(state.name, state.transport, state.last_message + state.wall_offset)
+                RememberedRobot(
+                    state.name,
+                    state.transport,
+                    state.last_message + state.wall_offset,
+                    not state.publisher_alive or now - state.last_message > robot_timeout(limits, state),
+                )
                 for state in self._robots.values()
                 if state.last_message is not None
             ]

@@ -10,7 +10,6 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from types import MappingProxyType
 
 from overseer.levels import Level
 from overseer.model.state import Component, ComponentKey
@@ -19,7 +18,7 @@ from overseer.model.state import Component, ComponentKey
 # names a feed so (feeds are topics and publisher ids), and the model's judgements treat it as never
 # updated.
 EXPECTED_FEED = "\0expected"
-NEVER_REPORTED = "expected, never reported"
+UNREPORTED = "expected, not reported"
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +42,7 @@ class Expectation:
     def unmet_message(self, reported: int) -> str:
         """What the component standing for this expectation says, with `reported` matching components."""
         if self.exact:
-            return NEVER_REPORTED
+            return UNREPORTED
         what = f"matching {self.prefix}*" if self.prefix else f"matching {self.shown_as}"
         return f"expected at least {self.at_least} components {what}, {reported or 'none'} reported"
 
@@ -62,9 +61,9 @@ class ListedRobot:
 
 @dataclass(frozen=True)
 class Inventory:
-    """Every listed robot by its exact name."""
+    """Every listed robot by its exact name (a plain mapping, so that it pickles to the ingest workers)."""
 
-    robots: Mapping[str, ListedRobot] = field(default_factory=lambda: MappingProxyType({}))
+    robots: Mapping[str, ListedRobot] = field(default_factory=dict)
 
 
 def expected_components(

@@ -109,11 +109,15 @@ class Forgetting(NamedTuple):
 
 
 class RememberedRobot(NamedTuple):
-    """A robot heard before this start: its name, its transport, when it was last heard (unix time)."""
+    """A robot heard before this start: its name, its transport, when it was last heard (unix time).
+
+    `down` when it was down then (silent, or its publisher gone): it is down until it speaks again.
+    """
 
     name: str
     transport: str
     heard_at: float
+    down: bool = False
 
 
 @dataclass(frozen=True, slots=True)
