@@ -113,6 +113,7 @@ def judged_robot(
         components,
         robot.publisher_alive,
         maintenance,
+        robot.listing is not None,
     )
 
 
