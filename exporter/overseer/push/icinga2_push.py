@@ -167,8 +167,9 @@ class Icinga2Push:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
             if self._downtimes is not None and self._downtimes.due(self._created):
-                # Before the results: a robot put in maintenance is in downtime when its DOWN arrives.
-                self._downtimes.sync(self._robot_hosts, self._created)
+                # Before the results (and, after a restart, right after finding our hosts): a host in a
+                # window is in downtime when its robot's DOWN arrives, or its TTL runs out.
+                self._downtimes.sync(self._created)
             attempted = 0
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):
