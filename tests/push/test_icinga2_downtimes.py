@@ -89,11 +89,11 @@ def open_window(url: str, robots: str, comment: str) -> dict[str, Any]:
 
 
 def downtimes(daemon: Icinga2) -> dict[str, dict[str, Any]]:
-    """Every downtime Icinga holds, by `host!service` (or host), with its author, comment and end."""
+    """Every downtime Icinga holds, by `host!service` (or host): its author, comment, end and entry time."""
     answer = daemon.api(
         "GET",
         "/v1/objects/downtimes",
-        {"attrs": ["host_name", "service_name", "author", "comment", "end_time"]},
+        {"attrs": ["host_name", "service_name", "author", "comment", "end_time", "entry_time"]},
     )
     return {
         "!".join(filter(None, (item["attrs"]["host_name"], item["attrs"]["service_name"]))): item["attrs"]
@@ -191,6 +191,32 @@ def test_an_icinga_that_was_down_gets_the_downtime_once_back(tmp_path: Path) -> 
             15,
             message="nothing pending",
         )
+
+
+def test_a_robot_first_seen_in_a_window_is_in_downtime_before_its_first_result(
+    tmp_path: Path, icinga: Icinga2
+) -> None:
+    with exporter(tmp_path, icinga, "dt4") as running:
+        open_window(running.server.url, "dt4/", "new robots arrive parked")
+        publish(running, "dt4/r1", *COMPONENTS)
+        wait_for(lambda: len(objects_of(icinga, "dt4.r1")) == 4, 30, message="host and services")
+        wait_for(lambda: objects_of(icinga, "dt4.r1") <= set(downtimes(icinga)), 15, message="downtimes")
+        entered = {name: held["entry_time"] for name, held in downtimes(icinga).items()}
+        services = icinga.api(
+            "GET", "/v1/objects/services", {"attrs": ["host_name", "state", "last_hard_state_change"]}
+        )["results"]
+    problems = {
+        item["name"]: item["attrs"]["last_hard_state_change"]
+        for item in services
+        if item["attrs"]["host_name"] == "dt4.r1" and item["attrs"]["state"] != 0
+    }
+    assert len(problems) == 2  # ros-diagnostics and ros-diagnostics-Power are CRITICAL from the start
+    late = {
+        name: round(entered[name] - changed, 3)
+        for name, changed in problems.items()
+        if entered[name] > changed
+    }
+    assert not late, f"downtimes entered after the first result (seconds late): {late}"
 
 
 WATCH_SECONDS = 20.0  # after a restart: longer than the downtimes' resync (10 s) and a result's TTL (2 s)
