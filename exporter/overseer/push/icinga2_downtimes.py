@@ -78,16 +78,7 @@ class Icinga2Downtimes:
                     log.info("removed the Icinga 2 downtime of %s for maintenance window %s", host, key)
                 self._schedule.forget_effect(key, TARGET, host)
             for key, host in sorted(wanted):
-                names = kept.get((key, host), "").split()
-                covered = {name.rsplit("!", 1)[0] for name in names}
-                if not names:
-                    names = self._schedule_downtime(windows[key], "Host", host)
-                    covered = {name.rsplit("!", 1)[0] for name in names}
-                for service in sorted(created[host]):
-                    if f"{host}!{service}" not in covered:
-                        names += self._schedule_downtime(windows[key], "Service", f"{host}!{service}")
-                if names != kept.get((key, host), "").split():
-                    self._schedule.keep_effect(key, TARGET, host, " ".join(names))
+                self._complete(windows[key], host, created[host], kept.get((key, host), ""))
         except Icinga2Error:
             missing = sum(1 for item in wanted if item not in kept)
             self.stats.synced(time.time(), missing + sum(1 for item in kept if item not in wanted))
@@ -95,6 +86,33 @@ class Icinga2Downtimes:
         self._synced = (revision, _size(created))
         self._resync_at = now + RESYNC_SECONDS
         self.stats.synced(time.time(), 0)
+
+    def cover(self, host: str, services: set[str]) -> None:
+        """Schedule at once what a host or service just made lacks (before its first result); Icinga2Error.
+
+        `host` was just made, or one of its `services`: the next `sync` would be too late for the result
+        that made it.
+        """
+        now = self._schedule.clock()
+        robot = robot_name(host)
+        covering = [w for w in self._schedule.windows(now) if w.until > now and w.robots.matches(robot)]
+        if not covering:
+            return
+        kept = self._schedule.effects(TARGET)
+        for window in covering:
+            self._complete(window, host, services, kept.get((window.key, host), ""))
+
+    def _complete(self, window: Window, host: str, services: set[str], reference: str) -> None:
+        """Schedule what `host` and its `services` lack of `window` beside the downtimes in `reference`."""
+        names = reference.split()
+        if not names:
+            names = self._schedule_downtime(window, "Host", host)
+        covered = {name.rsplit("!", 1)[0] for name in names}
+        for service in sorted(services):
+            if f"{host}!{service}" not in covered:
+                names += self._schedule_downtime(window, "Service", f"{host}!{service}")
+        if names != reference.split():
+            self._schedule.keep_effect(window.key, TARGET, host, " ".join(names))
 
     def _schedule_downtime(self, window: Window, kind: str, name: str) -> list[str]:
         """Schedule one fixed downtime of `window` for host or service `name`; the downtimes' names."""

@@ -236,12 +236,13 @@ class Icinga2Push:
         assert self._created is not None
         if result.host in self._foreign:
             return False
-        if result.host not in self._created and not self._create(
-            "hosts", result.host, "", self._host_attrs(result.host)
-        ):
+        made = result.host not in self._created
+        if made and not self._create("hosts", result.host, "", self._host_attrs(result.host)):
             return False
         if result.service and result.service not in self._created[result.host]:
-            self._create("services", result.host, result.service, self._service_attrs())
+            made = self._create("services", result.host, result.service, self._service_attrs()) or made
+        if made and self._downtimes is not None:  # in its window's downtime before its first result
+            self._downtimes.cover(result.host, self._created[result.host])
         body: dict[str, Any] = {
             "type": "Service" if result.service else "Host",
             "exit_status": result.exit_status,
