@@ -8,8 +8,8 @@ downtimes across a restart. The downtimes' names are kept beside the window in t
 database. They are removed (`remove-downtime`) only when the window ended early or is gone, or no
 longer covers the host's robot; a window that runs out lets Icinga end them itself, and a host deleted
 takes its own along. The push loop calls `sync` before it delivers results, so a robot put in
-maintenance is in downtime before its DOWN result arrives; a failure is raised to the push, which
-retries with its pause.
+maintenance is in downtime before its DOWN result arrives, and `cover` when it makes a host or service,
+before that object's first result; a failure is raised to the push, which retries with its pause.
 """
 
 from __future__ import annotations
