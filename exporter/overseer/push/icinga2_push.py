@@ -167,8 +167,9 @@ class Icinga2Push:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
             if self._downtimes is not None and self._downtimes.due(self._created):
-                # Before the results: a robot put in maintenance is in downtime when its DOWN arrives.
-                self._downtimes.sync(self._robot_hosts, self._created)
+                # Before the results (and, after a restart, right after finding our hosts): a host in a
+                # window is in downtime when its robot's DOWN arrives, or its TTL runs out.
+                self._downtimes.sync(self._created)
             attempted = 0
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):
@@ -235,12 +236,13 @@ class Icinga2Push:
         assert self._created is not None
         if result.host in self._foreign:
             return False
-        if result.host not in self._created and not self._create(
-            "hosts", result.host, "", self._host_attrs(result.host)
-        ):
+        made = result.host not in self._created
+        if made and not self._create("hosts", result.host, "", self._host_attrs(result.host)):
             return False
         if result.service and result.service not in self._created[result.host]:
-            self._create("services", result.host, result.service, self._service_attrs())
+            made = self._create("services", result.host, result.service, self._service_attrs()) or made
+        if made and self._downtimes is not None:  # in its window's downtime before its first result
+            self._downtimes.cover(result.host, self._created[result.host])
         body: dict[str, Any] = {
             "type": "Service" if result.service else "Host",
             "exit_status": result.exit_status,
