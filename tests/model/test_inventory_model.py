@@ -242,3 +242,23 @@ def test_a_shard_lists_only_the_robots_it_owns() -> None:
     fleet = Fleet()
     fleet.model.set_inventory(Inventory({"a": TB4, "b": TB4}), owns=lambda name: name == "a")
     assert [robot.name for robot in fleet.model.snapshot().robots] == ["a"]
+
+
+def test_a_clean_stop_keeps_what_robots_reported_and_a_restart_carries_on_from_it() -> None:
+    before = Fleet(robot_timeout=10)
+    before.publish("r1", "/Power/Battery", "/Motor", level=1)
+    before.now += 1
+    [kept] = before.model.heard(with_components=True)
+    assert kept.components == (("/Power/Battery", "hw", 1, "fine"), ("/Motor", "hw", 1, "fine"))
+    assert before.model.heard()[0].components == ()  # only a clean stop pays for them
+    after = Fleet(robot_timeout=10)
+    after.now = before.now + 2  # restarted two seconds later
+    after.model.remember([kept])
+    after.check()
+    assert after.components("r1") == {"/Power/Battery": (Level.WARN, "fine"), "/Motor": (Level.WARN, "fine")}
+    assert after.model.snapshot().robot_level(after.robot("r1")[1]) is Level.WARN
+    after.publish("r1", "/Power/Battery", "/Motor", level=1)  # heard again: the same components carry on
+    after.check()
+    assert after.take() == []
+    after.publish("r1", "/Power/Battery", "/Motor", level=2)
+    assert sorted(after.take()) == [("level", "r1", "/Motor"), ("level", "r1", "/Power/Battery")]

@@ -72,6 +72,9 @@ class Fleet(Protocol):
         """Forget a robot that is down and not listed: 'retired', or why not: 'unknown', 'listed', 'up'."""
         ...
 
-    def heard(self) -> list[RememberedRobot]:
-        """Every robot heard (in this run or before it) and when it was last heard; raises as `snapshot`."""
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard (in this run or before it) and when it was last heard; raises as `snapshot`.
+
+        `with_components` adds what each reported, for a clean stop.
+        """
         ...

@@ -130,9 +130,9 @@ class LocalFleet:
         """Forget a robot that is down and not listed (see `FleetModel.retire`)."""
         return self.model.retire(robot)
 
-    def heard(self) -> list[RememberedRobot]:
-        """Every robot heard and when it was last heard."""
-        return self.model.heard()
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard and when it was last heard (and what it reported, `with_components`)."""
+        return self.model.heard(with_components)
 
 
 class TransitionWatch:

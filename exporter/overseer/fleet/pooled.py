@@ -128,9 +128,9 @@ class PooledFleet:
                 return str(answer[0])
         return "unknown"
 
-    def heard(self) -> list[RememberedRobot]:
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
         """Every worker's robots heard; `WorkersUnavailable` rather than a list missing a worker's."""
-        return [robot for answer in self.pool.ask_every("heard") for robot in answer.value]
+        return [robot for answer in self.pool.ask_every("heard", with_components) for robot in answer.value]
 
 
 def _without_counters(part: ExpositionPart) -> ExpositionPart:

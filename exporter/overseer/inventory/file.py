@@ -37,6 +37,10 @@ RESERVED_LABELS = frozenset(
         "external_url",
         "le",
         "quantile",
+        # the variables of the Icinga 2 hosts the push makes, beside which labels become variables
+        "ros_robot",
+        "dummy_state",
+        "dummy_text",
     }
 )
 MAX_LABELS = 32
@@ -139,7 +143,7 @@ def _labels(value: object, key: str) -> dict[str, str]:
                 f"{key}: {name!r} is not a label name "
                 "(letters, digits and _, not starting with a digit or __)"
             )
-        if name in RESERVED_LABELS:
+        if name in RESERVED_LABELS or name.startswith("overseer_"):
             raise ConfigError(
                 f"{key}.{name}: {name!r} is a label of Overseer's own series; name it otherwise"
             )

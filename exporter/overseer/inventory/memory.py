@@ -43,19 +43,23 @@ class RobotMemory:
         self._thread.start()
 
     def stop(self) -> None:
-        """Save once more, then close the registry."""
+        """Save once more, with what each robot reported, then close the registry."""
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=10)
-        self.save()
+        self.save(with_components=True)
         self._registry.close()
 
-    def save(self) -> bool:
-        """Write what the fleet heard now; False when the fleet or the registry could not give or take it."""
+    def save(self, with_components: bool = False) -> bool:
+        """Write what the fleet heard now; False when the fleet or the registry could not give or take it.
+
+        `with_components` keeps each robot's components too (at a clean stop: a restarted exporter then
+        shows them as they were, and its outputs carry on rather than start again).
+        """
         if self._fleet is None:
             return False
         try:
-            heard = tuple(self._fleet.heard())
+            heard = tuple(self._fleet.heard(with_components))
         except FleetPartUnavailable as error:
             log.info("robots heard not saved this time: %s", error)
             return False

@@ -2,12 +2,13 @@
 
 They live in the event history's file (`events.path`), in a table of their own, whether the history is
 enabled or not, as maintenance windows do. The table holds what the fleet last said it heard: each
-robot, its transport and when it was last heard; it is written whole, so a robot the fleet forgot is no
-longer in it.
+robot, its transport, when it was last heard and whether it was down then, and (written at a clean stop)
+its components; it is written whole, so a robot the fleet forgot is no longer in it.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import sqlite3
 import threading
@@ -15,6 +16,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from overseer.model import RememberedRobot
+from overseer.model.state import RememberedComponent
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +27,8 @@ CREATE TABLE IF NOT EXISTS robots_heard (
     robot TEXT PRIMARY KEY,
     transport TEXT NOT NULL,
     heard_at REAL NOT NULL,    -- unix time of its last message
-    down INTEGER NOT NULL      -- 1 when it was down then
+    down INTEGER NOT NULL,     -- 1 when it was down then
+    components TEXT NOT NULL   -- JSON [[name, hardware_id, level, message], ...], at a clean stop
 ) WITHOUT ROWID;
 """
 
@@ -52,19 +55,28 @@ class RobotRegistry:
                 return []
             try:
                 rows = connection.execute(
-                    "SELECT robot, transport, heard_at, down FROM robots_heard"
+                    "SELECT robot, transport, heard_at, down, components FROM robots_heard"
                 ).fetchall()
             except sqlite3.Error as error:
                 self._failed("read", error)
                 return []
         return [
-            RememberedRobot(str(name), str(transport), float(at), bool(down))
-            for name, transport, at, down in rows
+            RememberedRobot(str(name), str(transport), float(at), bool(down), _components(components))
+            for name, transport, at, down, components in rows
         ]
 
     def save(self, robots: Iterable[RememberedRobot]) -> bool:
         """Make the table hold exactly `robots`; False when it cannot be written (logged)."""
-        rows = [(robot.name, robot.transport, robot.heard_at, int(robot.down)) for robot in robots]
+        rows = [
+            (
+                robot.name,
+                robot.transport,
+                robot.heard_at,
+                int(robot.down),
+                json.dumps(robot.components, ensure_ascii=False, separators=(",", ":")),
+            )
+            for robot in robots
+        ]
         with self._lock:
             if not rows and not Path(self.path).exists():
                 return True  # nothing to remember: the file is made with the first robot, not before
@@ -74,7 +86,7 @@ class RobotRegistry:
             try:
                 with connection:
                     connection.execute("DELETE FROM robots_heard")
-                    connection.executemany("INSERT INTO robots_heard VALUES (?, ?, ?, ?)", rows)
+                    connection.executemany("INSERT INTO robots_heard VALUES (?, ?, ?, ?, ?)", rows)
             except sqlite3.Error as error:
                 self._failed("write", error)
                 return False
@@ -126,3 +138,23 @@ class RobotRegistry:
 
     def _failed(self, what: str, error: sqlite3.Error) -> None:
         log.error("cannot %s the robots heard in %r: %s", what, self.path, error)
+
+
+def _components(text: object) -> tuple[RememberedComponent, ...]:
+    """The components kept in one row (none when the text is not what `save` writes)."""
+    try:
+        items = json.loads(str(text))
+    except (ValueError, RecursionError):
+        return ()
+    if not isinstance(items, list):
+        return ()
+    return tuple(
+        (item[0], item[1], item[2], item[3])
+        for item in items
+        if isinstance(item, list)
+        and len(item) == 4
+        and isinstance(item[0], str)
+        and isinstance(item[1], str)
+        and type(item[2]) is int
+        and isinstance(item[3], str)
+    )

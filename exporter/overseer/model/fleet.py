@@ -39,6 +39,7 @@ from overseer.model.state import (
     FleetLimits,
     ForgetReason,
     Forgetting,
+    RememberedComponent,
     RememberedRobot,
     RobotState,
     feed_stale_after,
@@ -415,7 +416,7 @@ class FleetModel:
         """Robots heard before this start: each silent since it was last heard, until it speaks again."""
         now, wall = self._clock(), self._wall_clock()
         with self._lock:
-            for name, transport, heard_at, down in robots:
+            for name, transport, heard_at, down, remembered in robots:
                 state = self._robots.get(name)
                 if state is not None and state.last_message is not None:
                     continue  # heard already in this run
@@ -424,7 +425,7 @@ class FleetModel:
                     continue
                 last = now - max(0.0, wall - heard_at)
                 listing = None if state is None else state.listing
-                components = expected_components(listing, {}, now)
+                components = expected_components(listing, _restored(remembered, last), now)
                 self._robots[name] = RobotState(
                     name,
                     transport,
@@ -437,21 +438,32 @@ class FleetModel:
                     listing=listing,
                 )
 
-    def heard(self) -> list[RememberedRobot]:
-        """Every robot heard, in this run or before it: when it was last heard (unix time), if down now."""
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard, in this run or before it: when it was last heard (unix time), if down now.
+
+        `with_components` adds what each reported (for a clean stop: a fleet of thousands is a lot).
+        """
         now = self._clock()
         limits = self.limits
         with self._lock:
-            return [
-                RememberedRobot(
-                    state.name,
-                    state.transport,
-                    state.last_message + state.wall_offset,
-                    not state.publisher_alive or now - state.last_message > robot_timeout(limits, state),
+            robots = [state for state in self._robots.values() if state.last_message is not None]
+        return [
+            RememberedRobot(
+                state.name,
+                state.transport,
+                state.last_message + state.wall_offset,
+                not state.publisher_alive or now - state.last_message > robot_timeout(limits, state),
+                tuple(
+                    (component.name, component.hardware_id, int(component.level), component.message)
+                    for component in state.components.values()
+                    if component.feed != EXPECTED_FEED
                 )
-                for state in self._robots.values()
-                if state.last_message is not None
-            ]
+                if with_components
+                else (),
+            )
+            for state in robots
+            if state.last_message is not None
+        ]
 
     def retire(self, name: str) -> str:
         """Forget a robot that is down and not listed: 'retired', or why not: 'unknown', 'listed', 'up'."""
@@ -762,6 +774,16 @@ def _merged(
         return previous
     changes = previous.level_changes + (previous.level is not level)
     return _component(previous.key, level, message, hardware_id, values, now, changes, feed)
+
+
+def _restored(remembered: Iterable[RememberedComponent], last: float) -> dict[ComponentKey, Component]:
+    """Components remembered from before a restart, as last reported at `last` (on no feed of this run)."""
+    restored: dict[ComponentKey, Component] = {}
+    for name, hardware_id, level, message in remembered:
+        key = (sys.intern(name), "")
+        if key not in restored and 0 <= level <= 3:
+            restored[key] = _component(key, _LEVELS[level], message, hardware_id, (), last, 0, "")
+    return restored
 
 
 def _listed(state: RobotState, listing: ListedRobot | None, now: float) -> RobotState:

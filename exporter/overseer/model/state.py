@@ -108,16 +108,22 @@ class Forgetting(NamedTuple):
     at: float
 
 
+# A component as remembered: its name, hardware_id, reported level and message (not its key-values).
+RememberedComponent = tuple[str, str, int, str]
+
+
 class RememberedRobot(NamedTuple):
     """A robot heard before this start: its name, its transport, when it was last heard (unix time).
 
     `down` when it was down then (silent, or its publisher gone): it is down until it speaks again.
+    `components` are its components then, as a clean stop keeps them (none after a crash).
     """
 
     name: str
     transport: str
     heard_at: float
     down: bool = False
+    components: tuple[RememberedComponent, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

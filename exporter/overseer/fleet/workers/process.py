@@ -60,7 +60,7 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
     if kind == "retire":
         return fleet.retire(argument)
     if kind == "heard":
-        return fleet.heard()
+        return fleet.heard(bool(argument))
     raise ValueError(f"unknown request {kind!r}")
 
 
