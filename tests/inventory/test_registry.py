@@ -15,7 +15,7 @@ from overseer.model.events import Event
 from overseer.model.maintenance import RobotSelector
 
 HEARD = [
-    RememberedRobot("site_a/r1", "dds", 1_700_000_000.5, False),
+    RememberedRobot("site_a/r1", "dds", 1_700_000_000.5, False, (("/Laser", "l1", 2, 'no "scans"'),)),
     RememberedRobot("r2", "zenoh", 1.0, True),
 ]
 
@@ -31,6 +31,17 @@ def test_what_is_saved_is_what_a_later_start_loads_and_a_robot_forgotten_is_not(
     assert later.load() == HEARD[:1]
     assert later.save(HEARD[1:])  # a save holds exactly what the fleet heard: r1 was forgotten since
     assert later.load() == HEARD[1:]
+
+
+def test_components_that_are_not_what_a_save_writes_are_left_out(tmp_path: Path) -> None:
+    path = str(tmp_path / "overseer-events.db")
+    assert RobotRegistry(path).save(HEARD)
+    with sqlite3.connect(path) as database:
+        database.execute(
+            """UPDATE robots_heard SET components = '[["/a", "", "2", "m"], ["/b", "", 1, "ok"]]'"""
+        )
+        database.execute("UPDATE robots_heard SET components = '{' WHERE robot = 'r2'")
+    assert sorted(robot.components for robot in RobotRegistry(path).load()) == [(), (("/b", "", 1, "ok"),)]
 
 
 def test_nothing_to_remember_makes_no_file(tmp_path: Path) -> None:
