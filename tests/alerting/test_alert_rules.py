@@ -118,10 +118,26 @@ def test_only_the_message_annotation_queries_and_the_robot_down_alert_not_at_all
     assert "message" not in alerts()["RosRobotDown"]["annotations"]
 
 
-def test_every_robot_alert_joins_the_one_per_robot_recording_rule() -> None:
-    # robot:overseer_web_info:external_url carries the link label; a robot it leaves out raises no alert.
+ALERT_LABELS = "robot:ros_diagnostics_robot_info:alert_labels"
+INVENTORY_LABELS = ("site", "model", "team")
+
+
+def test_every_robot_alert_takes_its_labels_from_the_one_per_robot_recording_rule() -> None:
+    # The rule carries the link label and the inventory labels; a robot it leaves out raises no alert.
+    join = f'* on (job, instance, robot) group_right {ALERT_LABELS}{{job="overseer"}}'
     for name, rule in robot_alerts().items():
-        assert "group_left (external_url) robot:overseer_web_info:external_url{" in rule["expr"], name
+        assert rule["expr"].endswith(join), name
+
+
+def test_the_inventory_labels_on_alerts_are_named_in_one_place_the_join_with_the_info_series() -> None:
+    (labels_rule,) = [rule for rule in load_rules(DEFAULT_RULES) if rule.get("record") == ALERT_LABELS]
+    copied = re.search(r"group_left \(([^)]*)\)\s*\(\s*ros_diagnostics_robot_info\{", labels_rule["expr"])
+    assert copied, labels_rule["expr"]
+    assert tuple(copied.group(1).split(", ")) == INVENTORY_LABELS
+    for rule in load_rules(DEFAULT_RULES):
+        if rule.get("record") != ALERT_LABELS:
+            named = [label for label in INVENTORY_LABELS if re.search(rf"\b{label}\b", rule["expr"])]
+            assert not named, f"{rule.get('alert') or rule['record']} names {named}"
 
 
 COMPONENT_SERIES = {"ros_diagnostics_level", "ros_diagnostics_level_changes_total", "ros_diagnostics_value"}
