@@ -82,6 +82,10 @@ def test_every_alert_has_for_severity_summary_description_and_a_runbook_section(
         assert name.lower() in runbook_anchors, f"docs/runbook.md has no section for {name}"
 
 
+# The alerts of a robot that does not speak: they inhibit its other alerts, and list no components.
+ROBOT_DOWN_ALERTS = {"RosRobotDown", "RosRobotNeverHeard"}
+
+
 def robot_alerts(path: Any = DEFAULT_RULES) -> dict[str, dict[str, Any]]:
     """The alerts about one robot: those that link to its page on the status page."""
     return {name: rule for name, rule in alerts(path).items() if "status_page_url" in rule["annotations"]}
@@ -93,12 +97,13 @@ def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alo
         "RosRobotWarning",
         "RosRobotStale",
         "RosRobotDown",
+        "RosRobotNeverHeard",
         "RosRobotFlapping",
     }
     for name, rule in robot_alerts().items():
         annotations = rule["annotations"]
         assert "{{ $labels.robot }}" in annotations["summary"], name
-        if name == "RosRobotDown":
+        if name in ROBOT_DOWN_ALERTS:
             continue
         assert "/api/v1/robots/{{ $labels.robot }}" in annotations["description"], name
         queries = re.findall(r"printf `([^`]*)`", annotations["message"])
@@ -108,14 +113,15 @@ def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alo
                 assert "instance=%q,robot=%q" in selector.matchers, f"{name}: {selector}"
 
 
-def test_only_the_message_annotation_queries_and_the_robot_down_alert_not_at_all() -> None:
+def test_only_the_message_annotation_queries_and_the_robot_down_alerts_not_at_all() -> None:
     # Prometheus expands every annotation of every pending or firing alert at every evaluation: at fleet scale
     # each query there costs once per robot in trouble.
     for name, rule in alerts().items():
         for annotation, text in rule["annotations"].items():
             if annotation != "message":
                 assert "| query" not in text, f"{name} {annotation}"
-    assert "message" not in alerts()["RosRobotDown"]["annotations"]
+    for name in ROBOT_DOWN_ALERTS:
+        assert "message" not in alerts()[name]["annotations"], name
 
 
 ALERT_LABELS = "robot:ros_diagnostics_robot_info:alert_labels"
@@ -179,20 +185,34 @@ def test_fast_profile_is_the_default_profile_with_shorter_for() -> None:
         assert parse_duration(rule["for"]) < parse_duration(alerts()[name]["for"]), name
 
 
+def margin_and_intervals(config: str, alert: str) -> tuple[float, float]:
+    """How much sooner `alert` fires than RosRobotStale, and a scrape plus an evaluation, in `config` (s)."""
+    path = DEPLOY_PROMETHEUS / config
+    settings = yaml.safe_load(path.read_text(encoding="utf-8"))
+    (rule_file,) = settings["rule_files"]
+    rule = alerts(path.parent / rule_file)
+    margin = parse_duration(rule["RosRobotStale"]["for"]) - parse_duration(rule[alert]["for"])
+    intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
+        settings["global"]["evaluation_interval"]
+    )
+    return margin, intervals
+
+
 @pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
 def test_robot_down_fires_before_its_stale_alert(config: str) -> None:
     # A stopped robot's components turn STALE (stale_after 5s) before it counts as down (robot_timeout 10s).
     # RosRobotDown must still fire first, by more than that gap plus one scrape and one evaluation, so that
     # Alertmanager inhibits RosRobotStale before it sends it.
-    path = DEPLOY_PROMETHEUS / config
-    settings = yaml.safe_load(path.read_text(encoding="utf-8"))
-    (rule_file,) = settings["rule_files"]
-    rule = alerts(path.parent / rule_file)
-    margin = parse_duration(rule["RosRobotStale"]["for"]) - parse_duration(rule["RosRobotDown"]["for"])
-    intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
-        settings["global"]["evaluation_interval"]
-    )
+    margin, intervals = margin_and_intervals(config, "RosRobotDown")
     assert margin > (10 - 5) + intervals
+
+
+@pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
+def test_robot_never_heard_fires_before_its_stale_alert(config: str) -> None:
+    # A robot never heard is STALE from the scrape that first shows it: RosRobotNeverHeard must fire more than
+    # one scrape and one evaluation before RosRobotStale, so that Alertmanager inhibits RosRobotStale.
+    margin, intervals = margin_and_intervals(config, "RosRobotNeverHeard")
+    assert margin > intervals
 
 
 def test_amtool_accepts_the_alertmanager_example() -> None:
@@ -225,13 +245,14 @@ def test_alertmanager_groups_by_robot() -> None:
     assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes)
 
 
-def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot() -> None:
+@pytest.mark.parametrize("source", sorted(ROBOT_DOWN_ALERTS))
+def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot(source: str) -> None:
     config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
-    robot_down = {"alertname": "RosRobotDown", **alerts()["RosRobotDown"]["labels"]}
+    robot_down = {"alertname": source, **alerts()[source]["labels"]}
     inhibited = set()
     for rule in config["inhibit_rules"]:
         if all(matches(matcher, robot_down) for matcher in rule["source_matchers"]):
-            assert "robot" in rule["equal"]
+            assert {"instance", "robot"} <= set(rule["equal"])
             inhibited |= {
                 name
                 for name, alert in alerts().items()
@@ -240,7 +261,7 @@ def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot() -> N
                     for matcher in rule["target_matchers"]
                 )
             }
-    assert inhibited == set(robot_alerts()) - {"RosRobotDown"}
+    assert inhibited == set(robot_alerts()) - ROBOT_DOWN_ALERTS
 
 
 @pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)
