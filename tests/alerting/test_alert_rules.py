@@ -239,10 +239,62 @@ def test_every_alert_routes_to_the_receiver_of_its_severity(name: str) -> None:
     assert result.stdout.strip() == receiver
 
 
+def routes(route: dict[str, Any]) -> list[dict[str, Any]]:
+    """A route and every route beneath it."""
+    return [route, *(child for sub in route.get("routes", []) for child in routes(sub))]
+
+
 def test_alertmanager_groups_by_robot() -> None:
     config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
-    routes = [config["route"], *config["route"]["routes"]]
-    assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes)
+    assert config["route"]["group_by"] == ["robot"]
+    assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes(config["route"]))
+
+
+def equality(matcher: str) -> tuple[str, str]:
+    """The label and value an equality matcher such as `site="site_a"` asks for."""
+    parsed = _MATCHER.fullmatch(matcher)
+    assert parsed and parsed.group(2) == "=", f"not an equality matcher: {matcher}"
+    return parsed.group(1), parsed.group(3)
+
+
+def site_and_team_routes() -> list[tuple[str, tuple[str, str], str]]:
+    """(severity, (label, value), receiver) of every route beneath a severity route of the example."""
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    found = []
+    for parent in config["route"]["routes"]:
+        ((_, severity),) = [equality(matcher) for matcher in parent["matchers"]]
+        for child in parent.get("routes", []):
+            (matcher,) = child["matchers"]
+            found.append((severity, equality(matcher), child["receiver"]))
+    return found
+
+
+def test_the_example_routes_critical_alerts_by_site_and_warnings_by_team() -> None:
+    routed_by = {(severity, label) for severity, (label, _), _ in site_and_team_routes()}
+    assert routed_by == {("critical", "site"), ("warning", "team")}
+
+
+@pytest.mark.parametrize(("severity", "label", "receiver"), site_and_team_routes())
+def test_every_robot_alert_of_a_site_or_team_reaches_its_receiver(
+    severity: str, label: tuple[str, str], receiver: str
+) -> None:
+    inventory = {"site": "site_a", "model": "tb4", "team": "logistics"} | dict([label])
+    for name, rule in robot_alerts().items():
+        if rule["labels"]["severity"] != severity:
+            continue
+        result = run(
+            "amtool",
+            "config",
+            "routes",
+            "test",
+            f"--config.file={ALERTMANAGER_EXAMPLE}",
+            f"--verify.receivers={receiver}",
+            f"alertname={name}",
+            f"severity={severity}",
+            "robot=robot1",
+            *(f"{key}={value}" for key, value in inventory.items()),
+        )
+        assert result.returncode == 0, f"{name}: {result.stdout}{result.stderr}"
 
 
 @pytest.mark.parametrize("source", sorted(ROBOT_DOWN_ALERTS))
