@@ -1,5 +1,7 @@
 """The Grafana dashboards: valid against Grafana's schema, and every query answered by a live Prometheus.
 
+What the inventory variables select is checked by promtool on hand-written series, which need no exporter.
+
 The live half scrapes an exporter fed by the simulator with the shipped Prometheus config and rules, fills in
 the dashboard variables the way Grafana does, and runs every panel target and variable query.
 """
@@ -90,6 +92,20 @@ def query_variables() -> list[tuple[str, dict[str, Any]]]:
     ]
 
 
+def variable_text(variable: dict[str, Any], chosen: list[str], everything: bool) -> str:
+    """What Grafana's Prometheus datasource puts for a variable.
+
+    That is its `allValue` when All is selected (`everything`) and it has one, else the values chosen (under
+    All, every value), regex-escaped and joined when the variable takes several.
+    """
+    if everything and "allValue" in variable:
+        return str(variable["allValue"])
+    if not (variable.get("multi") or variable.get("includeAll")):
+        return chosen[0]
+    escaped = [REGEX_SPECIAL.sub(r"\\\\\g<0>", value) for value in chosen]
+    return escaped[0] if len(escaped) == 1 else "(" + "|".join(escaped) + ")"
+
+
 def test_there_are_the_two_dashboards() -> None:
     assert [path.name for path in DASHBOARD_FILES] == ["fleet-overview.json", "robot-detail.json"]
 
@@ -159,9 +175,8 @@ def test_the_inventory_labels_are_variables_whose_all_matches_robots_without_the
         variable = variables[label]
         assert variable["query"] == f'label_values(ros_diagnostics_robot_info{{job="overseer"}}, {label})'
         assert variable["multi"] and variable["includeAll"], label
-        assert variable["allValue"] == ".*", (
-            label
-        )  # Grafana's own All, a list of values, misses the unlabelled
+        # Grafana's own All is the list of values found, which misses the robots without the label.
+        assert variable["allValue"] == ".*", label
         assert variable["current"] == {"text": ["All"], "value": ["$__all"]}, label
 
 
@@ -359,20 +374,6 @@ class LiveFleet:
             elif selector.metric not in self.exported:
                 unknown.add(selector.metric)
         return unknown
-
-
-def variable_text(variable: dict[str, Any], chosen: list[str], everything: bool) -> str:
-    """What Grafana's Prometheus datasource puts for a variable.
-
-    That is its `allValue` when All is selected (`everything`) and it has one, else the values chosen (under
-    All, every value), regex-escaped and joined when the variable takes several.
-    """
-    if everything and "allValue" in variable:
-        return str(variable["allValue"])
-    if not (variable.get("multi") or variable.get("includeAll")):
-        return chosen[0]
-    escaped = [REGEX_SPECIAL.sub(r"\\\\\g<0>", value) for value in chosen]
-    return escaped[0] if len(escaped) == 1 else "(" + "|".join(escaped) + ")"
 
 
 def natural_order(text: str) -> list[Any]:
