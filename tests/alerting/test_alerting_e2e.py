@@ -84,6 +84,7 @@ class Budget:
     warning_group_wait: float
     error_for: float
     down_for: float
+    never_heard: float
 
 
 def route_setting(config: dict[str, Any], severity: str, key: str) -> float:
@@ -118,6 +119,9 @@ def budget(prometheus: dict[str, Any], alertmanager: dict[str, Any], profile: Pr
         warning_group_wait=route_setting(alertmanager, "warning", "group_wait"),
         error_for=for_("RosRobotError"),
         down_for=for_("RosRobotDown"),
+        never_heard=for_("RosRobotNeverHeard")
+        + pipeline
+        + route_setting(alertmanager, "warning", "group_wait"),
     )
 
 
@@ -456,3 +460,30 @@ def test_alerts_reach_their_site_or_team_and_a_robot_never_heard_inhibits_only_i
     assert held[("RosRobotStale", "site_a")]["inhibitedBy"]
     assert held[("RosRobotStale", "site_b")]["state"] == "active"
     assert received == expected
+
+
+def test_a_listed_robot_never_heard_notifies_its_team_with_the_inventorys_labels(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    # The whole pipeline: the exporter reads an inventory with a robot that never comes up, Prometheus
+    # evaluates the shipped rules (RosRobotNeverHeard, the fast profile's for:) and Alertmanager routes it.
+    profile = PROFILES[PROFILE_NAME]
+    inventory = tmp_path / "inventory.yml"
+    inventory.write_text(
+        "robots:\n  ghost: {labels: {site: site_a, model: tb4, team: logistics}}\n", encoding="utf-8"
+    )
+    with running_webhook() as webhook:
+        alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
+        with alert_pipeline(
+            tmp_path, dds_domain, profile, webhook, alertmanager_config, f"--inventory.file={inventory}"
+        ) as pipeline:
+            alert = notification(
+                webhook, "firing", pipeline.limits.never_heard, alertname="RosRobotNeverHeard", robot="ghost"
+            )
+    assert alert.path == "/team-logistics"
+    assert {key: alert.labels[key] for key in ("site", "model", "team", "severity")} == {
+        "site": "site_a",
+        "model": "tb4",
+        "team": "logistics",
+        "severity": "warning",
+    }

@@ -386,7 +386,8 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
     """Three simulated robots with one ERROR and one WARN component each; robot1 has a stale one too.
 
     robot1 is in maintenance all day, by two recurring windows of the configuration, for the panels that
-    show maintenance.
+    show maintenance. The inventory gives robot1 and robot2 a site, a model and a team, and leaves robot3
+    out, for the dashboards' variables and the panels filtered by them.
     """
     tmp_path = tmp_path_factory.mktemp("dashboards")
     domain = fresh_domain_id()
@@ -394,8 +395,18 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
         {"robots": "robot1", "from": "00:00", "to": "12:00"},
         {"robots": "robot1", "from": "12:00", "to": "00:00"},
     ]
+    inventory = tmp_path / "inventory.yml"
+    inventory.write_text(
+        "robots:\n"
+        "  robot1: {labels: {site: site_a, model: tb4, team: logistics}}\n"
+        "  robot2: {labels: {site: site_b, model: tb4, team: inspection}}\n",
+        encoding="utf-8",
+    )
     config_file = tmp_path / "overseer.yml"
-    config_file.write_text(json.dumps({"maintenance": {"windows": all_day}}), encoding="utf-8")
+    config_file.write_text(
+        json.dumps({"maintenance": {"windows": all_day}, "inventory": {"file": str(inventory)}}),
+        encoding="utf-8",
+    )
     # A component that goes stale for the stale panels, and level changes for the level-change graphs.
     events = ["--event=2:robot1:/Temp/Sensor1:silence", "--event=3:robot1:/Motor/Motor1:WARN"]
     events += ["--event=5:robot1:/Motor/Motor1:OK"]
