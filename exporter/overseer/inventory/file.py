@@ -6,6 +6,7 @@ does; a duplicate key anywhere is one, since YAML would otherwise keep the last 
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping
 from pathlib import Path
@@ -68,9 +69,9 @@ def load_inventory(path: str | Path) -> Inventory:
 
 
 def parse_inventory(text: str, source: str) -> Inventory:
-    """The inventory in YAML `text`; `source` names it in errors."""
+    """The inventory in YAML `text` (JSON is YAML too, and read faster); `source` names it in errors."""
     try:
-        loaded = yaml.load(text, Loader=_StrictLoader)
+        loaded = _load(text)
     except (yaml.YAMLError, ValueError, RecursionError) as error:
         raise InventoryError(f"inventory.file {source!r}: not valid YAML: {first_line(error)}") from None
     try:
@@ -214,13 +215,46 @@ def _shown(name: object) -> str:
     return name if isinstance(name, str) and name.isprintable() and name else repr(name)
 
 
+def _load(text: str) -> object:
+    """The document in `text`: as JSON when it is one (several times faster to read), else as YAML.
+
+    A key given twice is an error in either.
+    """
+    if text.lstrip().startswith("{"):
+        try:
+            return json.loads(text, object_pairs_hook=_json_mapping)
+        except _DuplicateKey:
+            raise
+        except ValueError:
+            pass  # not JSON after all (a YAML flow mapping): YAML reads it below
+    return yaml.load(text, Loader=_StrictLoader)
+
+
+class _DuplicateKey(ValueError):
+    """A key given twice in one mapping."""
+
+
+def _json_mapping(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    mapping = dict(pairs)
+    if len(mapping) < len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise _DuplicateKey(f"{key!r} is given twice")
+            seen.add(key)
+    return mapping
+
+
 class _StrictLoader(yaml.CSafeLoader if hasattr(yaml, "CSafeLoader") else yaml.SafeLoader):  # type: ignore[misc]
     """YAML's safe loader (its C parser where there is one), refusing a key given twice in a mapping."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-        seen = set()
+        seen: set[object] = set()
         for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
+            # A string key is compared as written (cheap); any other is constructed to be compared.
+            key = (
+                key_node.value if key_node.tag == _STRING_TAG else self.construct_object(key_node, deep=True)
+            )
             try:
                 duplicate = key in seen
                 seen.add(key)
@@ -231,3 +265,6 @@ class _StrictLoader(yaml.CSafeLoader if hasattr(yaml, "CSafeLoader") else yaml.S
                     None, None, f"{key!r} is given twice", key_node.start_mark
                 )
         return super().construct_mapping(node, deep)  # type: ignore[no-any-return]
+
+
+_STRING_TAG = "tag:yaml.org,2002:str"
