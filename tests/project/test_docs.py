@@ -130,7 +130,7 @@ def test_every_metric_an_exporter_with_every_output_serves_is_documented(tmp_pat
 
 def slug(heading: str) -> str:
     """The anchor GitHub gives a heading: lower case, punctuation dropped, spaces to hyphens."""
-    text = re.sub(r"[`*_]|\[([^\]]*)\]\([^)]*\)", r"\1", heading).strip().lower()
+    text = re.sub(r"[`*]|\[([^\]]*)\]\([^)]*\)", r"\1", heading).strip().lower()  # markup, not text
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 
 
