@@ -20,7 +20,8 @@ from overseer.model import (
     RobotState,
 )
 from overseer.model.events import Event
-from overseer.model.inventory import UNREPORTED, is_stand_in
+from overseer.model.inventory import is_stand_in
+from overseer.model.state import UNREPORTED
 from overseer.model.transitions import TransitionDetector
 
 START = 1_700_000_000.0

@@ -6,9 +6,17 @@ exporter follows.
 """
 
 from overseer.model.fleet import Applied, FleetModel, LevelChange, LevelListener
-from overseer.model.inventory import Expectation, Inventory, ListedRobot
+from overseer.model.inventory import Inventory
 from overseer.model.snapshot import FleetSnapshot
-from overseer.model.state import Component, ComponentKey, FleetLimits, RememberedRobot, RobotState
+from overseer.model.state import (
+    Component,
+    ComponentKey,
+    Expectation,
+    FleetLimits,
+    ListedRobot,
+    RememberedRobot,
+    RobotState,
+)
 
 __all__ = [
     "Applied",

@@ -26,9 +26,10 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model.inventory import (
     EXPECTED_FEED,
     Inventory,
-    ListedRobot,
     expected_components,
     is_stand_in,
+    listed_state,
+    restored_components,
 )
 from overseer.model.snapshot import FleetSnapshot
 from overseer.model.state import (
@@ -39,7 +40,6 @@ from overseer.model.state import (
     FleetLimits,
     ForgetReason,
     Forgetting,
-    RememberedComponent,
     RememberedRobot,
     RobotState,
     feed_stale_after,
@@ -404,13 +404,13 @@ class FleetModel:
                     del self._robots[name]
                     self._forget(name, "unlisted", wall)
                 else:
-                    self._robots[name] = _listed(state, None, now)
+                    self._robots[name] = listed_state(state, None, now)
             for name, entry in listed.items():
                 known = self._robots.get(name)
                 if known is None:
                     known = RobotState(name, "", None, MappingProxyType({}), now, wall_offset=wall - now)
                 if known.listing != entry:
-                    self._robots[name] = _listed(known, entry, now)
+                    self._robots[name] = listed_state(known, entry, now)
 
     def remember(self, robots: Iterable[RememberedRobot]) -> None:
         """Robots heard before this start: each silent since it was last heard, until it speaks again."""
@@ -425,7 +425,7 @@ class FleetModel:
                     continue
                 last = now - max(0.0, wall - heard_at)
                 listing = None if state is None else state.listing
-                components = expected_components(listing, _restored(remembered, last), now)
+                components = expected_components(listing, restored_components(remembered, last), now)
                 self._robots[name] = RobotState(
                     name,
                     transport,
@@ -774,24 +774,6 @@ def _merged(
         return previous
     changes = previous.level_changes + (previous.level is not level)
     return _component(previous.key, level, message, hardware_id, values, now, changes, feed)
-
-
-def _restored(remembered: Iterable[RememberedComponent], last: float) -> dict[ComponentKey, Component]:
-    """Components remembered from before a restart, as last reported at `last` (on no feed of this run)."""
-    restored: dict[ComponentKey, Component] = {}
-    for name, hardware_id, level, message in remembered:
-        key = (sys.intern(name), "")
-        if key not in restored and 0 <= level <= 3:
-            restored[key] = _component(key, _LEVELS[level], message, hardware_id, (), last, 0, "")
-    return restored
-
-
-def _listed(state: RobotState, listing: ListedRobot | None, now: float) -> RobotState:
-    """`state` with `listing` as its entry of the inventory, and the stand-ins its expectations need."""
-    components = expected_components(listing, state.components, now)
-    return replace(
-        state, listing=listing, components=MappingProxyType(components), revision=state.revision + 1
-    )
 
 
 def _replace_components(

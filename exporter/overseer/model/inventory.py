@@ -2,61 +2,31 @@
 
 An `Inventory` is read from the operator's file (`inventory/file.py`) and handed to the model, which keeps
 every listed robot (heard or not) and shows each expected component a robot does not report as one of
-its components, STALE, whose message says what is missing (`expected_components`).
+its components, STALE, whose message says what is missing (`expected_components`). The records of a
+listing (`ListedRobot`, `Expectation`) are the model's own, in `state`. Robots remembered from before a
+restart come back with the components a clean stop kept (`restored_components`).
 """
 
 from __future__ import annotations
 
-import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+import sys
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 
 from overseer.levels import Level
-from overseer.model.state import Component, ComponentKey
+from overseer.model.state import (
+    Component,
+    ComponentKey,
+    ListedRobot,
+    RememberedComponent,
+    RobotState,
+)
 
 # The feed of a component that stands for an expectation no reported component meets: no transport
 # names a feed so (feeds are topics and publisher ids), and the model's judgements treat it as never
 # updated.
 EXPECTED_FEED = "\0expected"
-UNREPORTED = "expected, not reported"
-
-
-@dataclass(frozen=True, slots=True)
-class Expectation:
-    """Components a robot must report: one by its exact name, or `at_least` matching a prefix or regex."""
-
-    shown_as: str  # the component that stands for it while unmet: the name, 'prefix*' or the regex
-    exact: str = ""
-    prefix: str = ""
-    pattern: re.Pattern[str] | None = None
-    at_least: int = 1
-
-    def matches(self, name: str) -> bool:
-        """True when a component called `name` counts towards this expectation."""
-        if self.pattern is not None:
-            return self.pattern.fullmatch(name) is not None
-        if self.prefix:
-            return name.startswith(self.prefix)
-        return name == self.exact
-
-    def unmet_message(self, reported: int) -> str:
-        """What the component standing for this expectation says, with `reported` matching components."""
-        if self.exact:
-            return UNREPORTED
-        what = f"matching {self.prefix}*" if self.prefix else f"matching {self.shown_as}"
-        return f"expected at least {self.at_least} components {what}, {reported or 'none'} reported"
-
-
-@dataclass(frozen=True, slots=True)
-class ListedRobot:
-    """A robot of the inventory: its labels (sorted by name) and the components it must report."""
-
-    labels: tuple[tuple[str, str], ...] = ()
-    expected: tuple[Expectation, ...] = ()
-
-    def expects(self, name: str) -> bool:
-        """True when a component called `name` is one this robot must report."""
-        return any(expectation.matches(name) for expectation in self.expected)
 
 
 @dataclass(frozen=True)
@@ -97,3 +67,29 @@ def expected_components(
 def is_stand_in(component: Component) -> bool:
     """True for a component that stands for an unmet expectation, not one a robot reported."""
     return component.feed == EXPECTED_FEED
+
+
+def listed_state(state: RobotState, listing: ListedRobot | None, now: float) -> RobotState:
+    """`state` with `listing` as its entry of the inventory, and the stand-ins its expectations need."""
+    components = expected_components(listing, state.components, now)
+    return replace(
+        state, listing=listing, components=MappingProxyType(components), revision=state.revision + 1
+    )
+
+
+def restored_components(
+    remembered: Iterable[RememberedComponent], last: float
+) -> dict[ComponentKey, Component]:
+    """Components remembered from before a restart, as last reported at `last` (on no feed of this run)."""
+    restored: dict[ComponentKey, Component] = {}
+    intern = sys.intern
+    for name, hardware_id, level, message in remembered:
+        key = (intern(name), "")
+        if key not in restored and 0 <= level <= 3:
+            restored[key] = Component(
+                key, _LEVELS[level], intern(message), intern(hardware_id), (), last, 0, ""
+            )
+    return restored
+
+
+_LEVELS = tuple(Level)

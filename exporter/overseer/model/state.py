@@ -11,18 +11,16 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 from overseer.levels import Level
-
-if TYPE_CHECKING:
-    from overseer.model.inventory import ListedRobot
 
 # (name, discriminator): the discriminator is '' for every component but the statuses of one name that a
 # robot reports side by side with different hardware_ids in one array (a genuine clash): those are kept
 # apart, each under its hardware_id.
 ComponentKey = tuple[str, str]
 
+UNREPORTED = "expected, not reported"  # what the stand-in of an expected component no one reported says
 STALE_PERIODS = 3.0  # a component is STALE after this many of its producer's periods without an update
 PERIOD_SAMPLES = 5  # intervals a feed's period is the median of
 
@@ -76,6 +74,44 @@ class Component(NamedTuple):
     def name(self) -> str:
         """The status's name."""
         return self.key[0]
+
+
+@dataclass(frozen=True, slots=True)
+class Expectation:
+    """Components a robot's inventory entry says it must report: one by name, or `at_least` matching."""
+
+    shown_as: str  # the component that stands for it while unmet: the name, 'prefix*' or the regex
+    exact: str = ""
+    prefix: str = ""
+    pattern: re.Pattern[str] | None = None
+    at_least: int = 1
+
+    def matches(self, name: str) -> bool:
+        """True when a component called `name` counts towards this expectation."""
+        if self.pattern is not None:
+            return self.pattern.fullmatch(name) is not None
+        if self.prefix:
+            return name.startswith(self.prefix)
+        return name == self.exact
+
+    def unmet_message(self, reported: int) -> str:
+        """What the component standing for this expectation says, with `reported` matching components."""
+        if self.exact:
+            return UNREPORTED
+        what = f"matching {self.prefix}*" if self.prefix else f"matching {self.shown_as}"
+        return f"expected at least {self.at_least} components {what}, {reported or 'none'} reported"
+
+
+@dataclass(frozen=True, slots=True)
+class ListedRobot:
+    """A robot of the inventory: its labels (sorted by name) and the components it must report."""
+
+    labels: tuple[tuple[str, str], ...] = ()
+    expected: tuple[Expectation, ...] = ()
+
+    def expects(self, name: str) -> bool:
+        """True when a component called `name` is one this robot must report."""
+        return any(expectation.matches(name) for expectation in self.expected)
 
 
 class Feed(NamedTuple):
