@@ -121,7 +121,7 @@ def test_listed_robots_are_followed_from_the_start_with_their_labels_and_expecte
         "reported": False,
         "expected": True,
         "last_update": None,
-        "message": "expected at least 2 components matching /Wheels/*, 1 reported",
+        "message": "expected at least 2 components matching /Wheels/*: 1 reported, 1 missing",
     }
     battery = next(c for c in r1["components"] if c["name"] == "/Power/Battery")
     assert (battery["reported"], battery["expected"], battery["state"]) == (True, True, "OK")
@@ -131,7 +131,7 @@ def test_listed_robots_are_followed_from_the_start_with_their_labels_and_expecte
     assert ghost_check.returncode == 3
     assert ghost_check.stdout == "UNKNOWN - site_a/ghost is down: listed in the inventory, never heard\n"
     assert r1_check.returncode == 3
-    stand_in_line = "/Wheels/*: expected at least 2 components matching /Wheels/*, 1 reported"
+    stand_in_line = "/Wheels/*: expected at least 2 components matching /Wheels/*: 1 reported, 1 missing"
     assert stand_in_line in r1_check.stdout.splitlines()
 
 

@@ -84,10 +84,13 @@ def test_a_listed_robot_never_heard_is_down_with_its_expected_components_stale()
     assert (snapshot.robot_up(robot), robot.last_message, robot.listing) == (False, None, TB4)
     assert fleet.components("r1") == {
         "/Power/Battery": (Level.STALE, UNREPORTED),
-        "/Wheels/*": (Level.STALE, "expected at least 4 components matching /Wheels/*, none reported"),
+        "/Wheels/*": (
+            Level.STALE,
+            "expected at least 4 components matching /Wheels/*: none reported, 4 missing",
+        ),
         "cam_[0-9]: Rate": (
             Level.STALE,
-            "expected at least 2 components matching cam_[0-9]: Rate, none reported",
+            "expected at least 2 components matching cam_[0-9]: Rate: none reported, 2 missing",
         ),
     }
     fleet.now += 30 * 86400  # never forgotten, however long it stays silent
@@ -109,7 +112,10 @@ def test_an_expected_component_reported_takes_its_stand_ins_place_and_appears() 
         "cam_1: Rate": (Level.OK, "fine"),
         "cam_2: Rate": (Level.OK, "fine"),
         "/Other": (Level.OK, "fine"),
-        "/Wheels/*": (Level.STALE, "expected at least 4 components matching /Wheels/*, 1 reported"),
+        "/Wheels/*": (
+            Level.STALE,
+            "expected at least 4 components matching /Wheels/*: 1 reported, 3 missing",
+        ),
     }
     events = fleet.take()
     assert ("appeared", "r1", "/Power/Battery") in events

@@ -99,7 +99,8 @@ class Expectation:
         if self.exact:
             return UNREPORTED
         what = f"matching {self.prefix}*" if self.prefix else f"matching {self.shown_as}"
-        return f"expected at least {self.at_least} components {what}, {reported or 'none'} reported"
+        counts = f"{reported or 'none'} reported, {self.at_least - reported} missing"
+        return f"expected at least {self.at_least} components {what}: {counts}"
 
 
 @dataclass(frozen=True, slots=True)
