@@ -9,7 +9,10 @@ from __future__ import annotations
 import base64
 import json
 import subprocess
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -233,14 +236,35 @@ def retiring_exporter(tmp_path: Path, **sections: Any) -> Any:
     )
 
 
+@contextmanager
+def keeps_publishing(running: Exporter, robot: str) -> Iterator[None]:
+    """`robot` publishes every 0.1 s until the block ends: up however slow the machine is."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.wait(0.1):
+            publish(running, robot, (0, "/a", "ok"))
+
+    publish(running, robot, (0, "/a", "ok"))
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
 def test_retiring_forgets_a_robot_that_is_down_and_not_listed_and_says_who(tmp_path: Path) -> None:
     inventory = write(tmp_path / "inventory.yml", INVENTORY)
     alice = write(tmp_path / "alice", "alice:secret\n")
-    with retiring_exporter(tmp_path, inventory={"file": inventory}) as running:
+    with (
+        retiring_exporter(tmp_path, inventory={"file": inventory}) as running,
+        keeps_publishing(running, "alive"),
+    ):
         publish(running, "dead", (0, "/a", "ok"))
         publish(running, "site_a/r1", (0, "/Power/Battery", "ok"))
         time.sleep(0.8)
-        publish(running, "alive", (0, "/a", "ok"))
         url = ("--url", running.server.url, "--authorization-file", alice)
         as_bob = robots_command("retire", "dead", "--url", running.server.url, "-a", "bob:secret")
         refused = robots_command("retire", "alive", "site_a/r1", "nobody", *url)
