@@ -2,7 +2,7 @@
 // refreshes every few seconds keeping the filter, the scroll position and the open folders.
 
 import {agoText, badge, element, getJson, timeText} from "./dom.js";
-import {renderMatches, renderRobots, renderSummary} from "./fleet.js";
+import {downText, renderMatches, renderRobots, renderSummary} from "./fleet.js";
 import {fleetQuery, pageHref, readQuery, robotQuery} from "./location.js";
 import {
   MAINTENANCE, loadMaintenance, renderMaintenancePanel, renderRobotMaintenance, setUpMaintenanceForms,
@@ -95,10 +95,7 @@ async function renderRobot(current) {
   } else {
     title.replaceChildren(badge(robot.maintenance ? MAINTENANCE : (robot.up ? robot.state : "STALE")), " ",
       element("span", {class: "node-name"}, robot.robot), `: ${robot.up ? robot.state : "DOWN"}`);
-    const c = robot.counts;
-    document.getElementById("robot-facts").textContent =
-      `${robot.transport} · last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})`
-      + ` · ${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`;
+    renderRobotFacts(robot);
     const folders = folderMemory(current.robot);
     renderTree(tree, buildTree(robot.components), robot.generated_at, folders, showHistoryOf);
   }
@@ -111,6 +108,19 @@ async function renderRobot(current) {
   document.getElementById("robot-view").hidden = false;
   document.title = `${current.robot} — Overseer`;
   return true;
+}
+
+function renderRobotFacts(robot) {
+  const c = robot.counts;
+  const heard = robot.last_message !== null
+    ? `last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})` : null;
+  const facts = [
+    downText(robot, robot.generated_at),
+    robot.transport || null,
+    heard,
+    `${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`,
+  ].filter((fact) => fact !== null);
+  document.getElementById("robot-facts").textContent = facts.join(" · ");
 }
 
 function allHistoryLink(robot) {

@@ -1,7 +1,7 @@
 // The fleet view: counts per level, robots grouped by namespace prefix, filtered, searched and sorted,
 // and the components across the fleet that match the filter (found by the exporter, bounded).
 
-import {STATES, agoText, badge, element, rank, timeText, worstState} from "./dom.js";
+import {STATES, agoText, badge, durationText, element, rank, timeText, worstState} from "./dom.js";
 import {pageHref, robotQuery} from "./location.js";
 import {MAINTENANCE, shownState} from "./maintenance.js";
 
@@ -42,6 +42,25 @@ export function groupRobots(robots) {
     groups.get(name).push(robot);
   }
   return groups;
+}
+
+/** Why a robot is down ("down: publisher left", "never heard: listed in the inventory"); null while up. */
+export function downText(robot, now) {
+  if (robot.up) return null;
+  switch (robot.down_reason) {
+    case "never_heard": return robot.listed ? "never heard: listed in the inventory" : "never heard";
+    case "silent": return `down: silent for ${durationText(now - robot.last_message)}`;
+    case "publisher_left": return "down: publisher left";
+    default: return "down";
+  }
+}
+
+/** The fleet's "last message" of a robot: how long ago, and when it is down, why. */
+function lastMessageText(robot, now) {
+  const reason = downText(robot, now);
+  if (reason === null) return agoText(robot.last_message, now);
+  if (robot.last_message === null || robot.down_reason === "silent") return reason;
+  return `${reason}, last message ${agoText(robot.last_message, now)}`;
 }
 
 /** The counts per level at the top; each level is a toggle of the level filter. Robots in maintenance
@@ -105,8 +124,9 @@ export function renderRobots(robotsDocument, view, matchedRobots, openGroups, on
 function robotRow(robot, now, onOpenRobot) {
   const c = robot.counts;
   const m = robot.maintenance;
-  const seen = robot.up ? agoText(robot.last_message, now) : `down, last ${agoText(robot.last_message, now)}`;
+  const seen = lastMessageText(robot, now);
   return element("tr", {"data-robot": robot.robot, "data-state": shownState(robot),
+                        "data-down-reason": robot.up ? null : robot.down_reason,
                         class: m ? "maintenance" : (robot.up ? null : "down")},
     element("td", {}, badge(shownState(robot))),
     element("td", {class: "robot-name"}, robotLink(robot.robot, onOpenRobot)),
