@@ -12,6 +12,8 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Iterator
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import pytest
 from playwright.sync_api import Browser, Page, expect
@@ -87,6 +89,98 @@ def page(browser: Browser) -> Iterator[Page]:
         yield page
 
 
+def query_of(page: Page) -> dict[str, list[str]]:
+    return parse_qs(urlsplit(page.url).query)
+
+
+def shown_robots(page: Page) -> list[str]:
+    robots: list[str] = page.locator("#groups tr[data-robot]").evaluate_all(
+        "rows => rows.map(r => r.dataset.robot)"
+    )
+    return robots
+
+
+def shown_groups(page: Page) -> list[list[Any]]:
+    """[group, its title, its robots] of each group on the page, in order."""
+    groups: list[list[Any]] = page.locator("details.group").evaluate_all(
+        "groups => groups.map(g => [g.dataset.group, g.querySelector('.group-name').textContent,"
+        " [...g.querySelectorAll('tr[data-robot]')].map(r => r.dataset.robot)])"
+    )
+    return groups
+
+
+def choice(page: Page, selector: str) -> str:
+    """The text of the option a select shows."""
+    text: str = page.locator(selector).evaluate("s => s.selectedOptions[0].textContent")
+    return text
+
+
+def test_group_by_site_then_by_model_puts_each_robot_under_its_value_and_the_rest_apart(
+    page: Page, fleet: Exporter
+) -> None:
+    open_page(page, fleet.url + "/")
+    options = page.locator("#group option").all_text_contents()
+    assert options == ["namespace", "model", "site", "team"]
+    page.select_option("#group", "site")
+    expect(page.locator("details.group").first).to_have_attribute("data-group", "site_a")
+    assert query_of(page) == {"group": ["site"]}
+    assert shown_groups(page) == [
+        ["site_a", "site=site_a", ["robot1", "robot3"]],
+        ["site_b", "site=site_b", ["ghost", "robot2"]],
+        ["", "(no site)", UNLISTED],
+    ]
+    labels = page.locator('tr[data-robot="robot1"] td.labels .label').all_text_contents()
+    assert labels == ["model=tb4", "site=site_a", "team=logistics"]
+
+    page.select_option("#group", "model")
+    expect(page.locator("details.group").first).to_have_attribute("data-group", "mk2")
+    assert query_of(page) == {"group": ["model"]}
+    assert shown_groups(page) == [
+        ["mk2", "model=mk2", ["robot3"]],
+        ["tb4", "model=tb4", ["ghost", "robot1", "robot2"]],
+        ["", "(no model)", UNLISTED],
+    ]
+    expect(page.locator('details.group[data-group="tb4"] > summary')).to_contain_text("3 robots")
+
+
+def test_a_label_filter_shows_only_the_robots_with_that_label_and_their_components(
+    page: Page, fleet: Exporter
+) -> None:
+    open_page(page, fleet.url + "/")
+    site = 'select[data-label="site"]'
+    assert page.locator(f"{site} option").all_text_contents() == ["all", "site_a", "site_b", "(no site)"]
+    page.select_option(site, "site_a")
+    expect(page.locator("#showing")).to_have_text("Showing 2 of 7 robots")
+    assert shown_robots(page) == ["robot1", "robot3"]
+    assert query_of(page) == {"label": ["site=site_a"]}
+
+    page.select_option('select[data-label="model"]', "tb4")
+    expect(page.locator("#showing")).to_have_text("Showing 1 of 7 robots")
+    assert shown_robots(page) == ["robot1"]
+    assert query_of(page) == {"label": ["model=tb4", "site=site_a"]}
+    page.fill("#search", "no scans")  # every simulated robot has it: only robot1's are listed
+    expect(page.locator("#matches-count")).to_have_text("1 components match")
+    matches = page.locator("#matches-rows tr").evaluate_all("rows => rows.map(r => r.dataset.robot)")
+    assert matches == ["robot1"]
+
+    page.fill("#search", "")
+    page.select_option('select[data-label="model"]', "all")
+    page.select_option(site, "(no site)")
+    expect(page.locator("#showing")).to_have_text("Showing 3 of 7 robots")
+    assert shown_robots(page) == UNLISTED
+    assert query_of(page) == {"label": ["site="]}
+
+    page.select_option(site, "all")
+    page.select_option('select[data-label="team"]', HOSTILE_TEAM)  # a label's value is text, never HTML
+    expect(page.locator("#showing")).to_have_text("Showing 1 of 7 robots")
+    assert shown_robots(page) == ["robot3"]
+    expect(page.locator('tr[data-robot="robot3"] .label[data-label="team"]')).to_have_text(
+        f"team={HOSTILE_TEAM}"
+    )
+    assert page.locator("main img").count() == 0
+    assert page.evaluate("window.pwned") is None
+
+
 def test_a_listed_robot_never_heard_says_so_instead_of_a_time(page: Page, fleet: Exporter) -> None:
     open_page(page, fleet.url + "/")
     row = page.locator('#groups tr[data-robot="ghost"]')
@@ -97,6 +191,7 @@ def test_a_listed_robot_never_heard_says_so_instead_of_a_time(page: Page, fleet:
     facts = page.locator("#robot-facts")
     expect(facts).to_contain_text("never heard: listed in the inventory · 2 components")
     assert "ago" not in (facts.text_content() or "") and "last message" not in (facts.text_content() or "")
+    expect(facts.locator(".label")).to_have_text(["model=tb4", "site=site_b"])
 
 
 def test_a_down_robot_says_why_its_publisher_left_or_it_went_silent(page: Page, fleet: Exporter) -> None:
@@ -113,3 +208,49 @@ def test_a_down_robot_says_why_its_publisher_left_or_it_went_silent(page: Page, 
     expect(page.locator("#robot-facts")).to_have_text(
         re.compile(r"^down: silent for \d+ s · dds · last message .+ \(\d+ s ago\) · 1 components")
     )
+
+
+def test_the_label_filter_and_grouping_deep_link_round_trips(page: Page, fleet: Exporter) -> None:
+    link = "/?sort=level&label=site=site_a&label=team=logistics&group=model"
+    open_page(page, fleet.url + link)
+    assert choice(page, 'select[data-label="site"]') == "site_a"
+    assert choice(page, 'select[data-label="team"]') == "logistics"
+    assert choice(page, 'select[data-label="model"]') == "all"
+    assert choice(page, "#group") == "model"
+    expect(page.locator("#sort")).to_have_value("level")
+    assert shown_groups(page) == [["tb4", "model=tb4", ["robot1"]]]
+    wanted = {"sort": ["level"], "label": ["site=site_a", "team=logistics"], "group": ["model"]}
+
+    page.click('#groups tr[data-robot="robot1"] a')
+    page.wait_for_selector("body[data-view=robot]")
+    assert query_of(page) == {"robot": ["robot1"]}
+    page.click("#back")
+    page.wait_for_selector("body[data-view=fleet]")
+    assert query_of(page) == wanted
+    assert shown_robots(page) == ["robot1"]
+    page.reload()
+    page.wait_for_selector("body[data-view=fleet]")
+    assert query_of(page) == wanted
+    assert choice(page, 'select[data-label="team"]') == "logistics"
+    assert shown_groups(page) == [["tb4", "model=tb4", ["robot1"]]]
+
+    open_page(page, fleet.url + "/?robot=robot2", view="robot")  # a robot's label leads to its fleet
+    page.click('#robot-facts a:has(.label[data-label="site"])')
+    page.wait_for_selector("body[data-view=fleet]")
+    assert query_of(page) == {"label": ["site=site_b"]}
+    assert shown_robots(page) == ["ghost", "robot2"]
+
+    open_page(page, fleet.url + "/?label=site=site_z&group=rack")  # labels no robot has are kept
+    assert choice(page, 'select[data-label="site"]') == "site_z"
+    assert choice(page, "#group") == "rack"
+    expect(page.locator("#showing")).to_have_text("Showing 0 of 7 robots")
+
+
+def test_clear_filters_forgets_the_labels_and_the_grouping(page: Page, fleet: Exporter) -> None:
+    open_page(page, fleet.url + "/?label=site=site_b&group=site")
+    assert shown_robots(page) == ["ghost", "robot2"]
+    page.click("#clear")
+    expect(page.locator("#showing")).to_have_text("Showing 7 of 7 robots")
+    assert page.url == fleet.url + "/"
+    assert choice(page, 'select[data-label="site"]') == "all"
+    assert choice(page, "#group") == "namespace"
