@@ -192,6 +192,10 @@ def test_a_listed_robot_never_heard_says_so_instead_of_a_time(page: Page, fleet:
     expect(facts).to_contain_text("never heard: listed in the inventory · 2 components")
     assert "ago" not in (facts.text_content() or "") and "last message" not in (facts.text_content() or "")
     expect(facts.locator(".label")).to_have_text(["model=tb4", "site=site_b"])
+    stand_ins = page.locator('#tree [data-reported="false"]').evaluate_all(
+        "nodes => nodes.map(n => n.dataset.component)"
+    )
+    assert stand_ins == ["/Arm/Gripper", "/Power/Robot Battery"]
 
 
 def test_a_down_robot_says_why_its_publisher_left_or_it_went_silent(page: Page, fleet: Exporter) -> None:
@@ -208,6 +212,31 @@ def test_a_down_robot_says_why_its_publisher_left_or_it_went_silent(page: Page, 
     expect(page.locator("#robot-facts")).to_have_text(
         re.compile(r"^down: silent for \d+ s · dds · last message .+ \(\d+ s ago\) · 1 components")
     )
+
+
+def test_an_expected_component_not_reported_is_marked_and_has_no_update_time(
+    page: Page, fleet: Exporter
+) -> None:
+    open_page(page, fleet.url + "/?robot=robot1", view="robot")
+    leaves = page.locator("#tree .leaf").evaluate_all(
+        """leaves => Object.fromEntries(leaves.map(l => [
+          l.querySelector("[data-component]").dataset.component,
+          {tags: [...l.querySelectorAll(".tag")].map(t => t.textContent),
+           message: l.querySelector(".message").textContent,
+           updated: l.querySelector(".updated")?.textContent ?? null}]))"""
+    )
+    assert leaves["/Arm/Gripper"] == {
+        "tags": ["expected", "not reported"],
+        "message": "expected, not reported",
+        "updated": None,
+    }
+    assert leaves["/Power/Robot Battery"]["tags"] == ["expected"]
+    assert re.fullmatch(r"\d+ s ago", leaves["/Power/Robot Battery"]["updated"])
+    assert leaves["/Temp/Sensor1"]["tags"] == []
+    gripper = page.locator('#tree [data-component="/Arm/Gripper"]')
+    expect(gripper).to_have_attribute("data-state", "STALE")
+    expect(gripper).to_have_attribute("data-reported", "false")
+    expect(page.locator('#tree details[data-path="/Arm"]')).to_have_attribute("open", "")
 
 
 def test_the_label_filter_and_grouping_deep_link_round_trips(page: Page, fleet: Exporter) -> None:
