@@ -87,6 +87,7 @@ def test_listed_robots_are_followed_from_the_start_with_their_labels_and_expecte
         _, site_a = call(running, "/api/v1/robots?label=site=site_a")
         _, both = call(running, "/api/v1/robots?label=site=site_a&label=team=ops")
         _, none = call(running, "/api/v1/robots?label=site=site_c")
+        _, no_site = call(running, "/api/v1/robots?label=site=")
         bad_status, bad = call(running, "/api/v1/robots?label=site")
         ghost_check = check("--url", running.server.url, "-r", "site_a/ghost")
         r1_check = check("--url", running.server.url, "-r", "site_a/r1")
@@ -130,6 +131,7 @@ def test_listed_robots_are_followed_from_the_start_with_their_labels_and_expecte
     assert (battery["reported"], battery["expected"], battery["state"]) == (True, True, "OK")
     assert [robot["robot"] for robot in site_a["robots"]] == ["site_a/ghost", "site_a/r1"]
     assert [robot["robot"] for robot in both["robots"]] == ["site_a/r1"] and none["robots"] == []
+    assert [robot["robot"] for robot in no_site["robots"]] == ["unlisted"]  # as Prometheus's site=""
     assert bad_status == 400 and bad["error"] == "label: expected NAME=VALUE, got 'site'"
     assert ghost_check.returncode == 3
     assert ghost_check.stdout == "UNKNOWN - site_a/ghost is down: listed in the inventory, never heard\n"

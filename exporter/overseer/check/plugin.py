@@ -11,7 +11,6 @@ import sys
 from overseer import __version__
 from overseer.check import api_reader
 from overseer.check.document import CheckError, robot_from_document
-from overseer.check.group import judge_group, summaries_from_document
 from overseer.client.exporter import ExporterClient, credentials, exporter_url, timeout_seconds
 from overseer.client.http import Answer, ClientError, Tls
 from overseer.verdict import CRITICAL, UNKNOWN, WARNING, Settings, clean, judge, plugin_output
@@ -356,7 +355,9 @@ def check(options: Options) -> tuple[int, str]:
 
 def check_group(client: ExporterClient, options: Options) -> tuple[int, str]:
     """Read the robots carrying every label asked for and judge them as one group."""
-    from urllib.parse import quote  # only a group check pays for it
+    from urllib.parse import quote  # only a group check pays for these
+
+    from overseer.check.group import judge_group, summaries_from_document
 
     query = "&".join("label=" + quote(label, safe="=") for label in options.labels)
     url = client.url_of(ROBOTS_PATH) + "?" + query

@@ -16,14 +16,17 @@ _COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 
 @dataclass(frozen=True)
 class RobotQuery:
-    """Which robots GET /api/v1/robots returns: those with every one of `labels` (name, value)."""
+    """Which robots GET /api/v1/robots returns: those with every one of `labels` (name, value).
+
+    An empty value asks for robots without the label, as a Prometheus matcher `site=""` does.
+    """
 
     labels: tuple[tuple[str, str], ...] = ()
 
     def matches(self, robot: RobotState) -> bool:
         """True when `robot` carries every label asked for."""
-        have = robot.listing.labels if robot.listing is not None else ()
-        return all(label in have for label in self.labels)
+        have = dict(robot.listing.labels) if robot.listing is not None else {}
+        return all(have.get(name, "") == value for name, value in self.labels)
 
 
 def robots_document(snapshot: FleetSnapshot, query: RobotQuery | None = None) -> dict[str, Any]:
