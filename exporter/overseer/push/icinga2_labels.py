@@ -50,10 +50,10 @@ class HostLabels:
             )
 
     def variables(self, host: str) -> dict[str, Any]:
-        """The label variables of a host about to be made (and taken as set from then on)."""
+        """The label variables of a host about to be made (and taken as set from then on); none without."""
         labels = self._wanted.get(host, ())
         self._set[host] = labels
-        return {**dict(labels), LABELS_VARIABLE: [name for name, _ in labels]}
+        return {**dict(labels), LABELS_VARIABLE: [name for name, _ in labels]} if labels else {}
 
     def forget(self, host: str) -> None:
         """A host deleted: nothing to keep of it."""
