@@ -152,3 +152,34 @@ def test_yaml_that_does_not_parse_and_a_file_that_cannot_be_read_say_so(tmp_path
 def test_no_reserved_label_is_a_valid_prometheus_label_of_ours_to_give() -> None:
     assert all(re.fullmatch(r"[a-z_]+", name) for name in RESERVED_LABELS)
     assert {"robot", "component", "hardware_id", "instance", "job", "severity"} <= RESERVED_LABELS
+
+
+def test_yaml_reads_as_a_safe_load_would_merge_keys_and_anchors_included() -> None:
+    text = """
+models:
+  base: &base {labels: {vendor: acme}, expected: [/Power]}
+  tb4:
+    <<: *base
+    labels: {vendor: clearpath}
+robots:
+  r1: {model: tb4, labels: {site: a, note: "007"}}
+  r2: {model: base, labels: *labels}
+"""
+    with pytest.raises(InventoryError, match="not valid YAML: found undefined alias"):
+        parse_inventory(text, "f")
+    inventory = parse_inventory(text.replace("*labels", "{site: b}"), "f")
+    assert dict(inventory.robots["r1"].labels) == {
+        "model": "tb4",
+        "vendor": "clearpath",
+        "site": "a",
+        "note": "007",
+    }
+    assert [e.exact for e in inventory.robots["r1"].expected] == ["/Power"]
+    with pytest.raises(
+        InventoryError, match=r"robots.r1.labels.enabled: expected a non-empty string \(quote it in YAML\), got True"
+    ):
+        parse_inventory("robots:\n  r1: {labels: {enabled: yes}}\n", "f")  # YAML 1.1's yes is true
+    with pytest.raises(InventoryError, match=r"robots.r1.labels: True is not a label name"):
+        parse_inventory("robots:\n  r1: {labels: {on: x}}\n", "f")  # and so is its on
+    with pytest.raises(InventoryError, match="found an unhashable key"):
+        parse_inventory("robots:\n  ? [a, b]\n  : {}\n", "f")
