@@ -176,7 +176,8 @@ robots:
     }
     assert [e.exact for e in inventory.robots["r1"].expected] == ["/Power"]
     with pytest.raises(
-        InventoryError, match=r"robots.r1.labels.enabled: expected a non-empty string \(quote it in YAML\), got True"
+        InventoryError,
+        match=r"robots.r1.labels.enabled: expected a non-empty string \(quote it in YAML\), got True",
     ):
         parse_inventory("robots:\n  r1: {labels: {enabled: yes}}\n", "f")  # YAML 1.1's yes is true
     with pytest.raises(InventoryError, match=r"robots.r1.labels: True is not a label name"):
