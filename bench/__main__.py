@@ -26,6 +26,7 @@ BENCHMARKS = (
     "bench.bench_events",
     "bench.bench_icinga2",
     "bench.bench_alert_rules",
+    "bench.bench_inventory",
 )
 
 

@@ -184,7 +184,7 @@ def wait_for(predicate: Any, timeout: float, interval: float = 0.2, message: str
             result = predicate()
             if result:
                 return result
-        except (urllib.error.URLError, ConnectionError, KeyError, ValueError) as error:
+        except (urllib.error.URLError, ConnectionError, TimeoutError, KeyError, ValueError) as error:
             last_error = error
         time.sleep(interval)
     raise AssertionError(f"timed out after {timeout}s waiting for {message} (last error: {last_error})")

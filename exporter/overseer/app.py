@@ -17,11 +17,16 @@ from prometheus_client.registry import Collector
 from overseer.codec import compiled
 from overseer.config import Config
 from overseer.config.loading import ros_settings
-from overseer.fleet.interface import Fleet
+from overseer.fleet.interface import Fleet, FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.pooled import PooledFleet
 from overseer.history.api import EVENTS_PATH, events_route
 from overseer.history.service import EventHistory
+from overseer.inventory.memory import RobotMemory
+from overseer.inventory.metrics import InventoryCollector
+from overseer.inventory.registry import RobotRegistry
+from overseer.inventory.reload import InventoryReloader
+from overseer.inventory.retirement import Retirements
 from overseer.maintenance.effects import EffectsCollector, EffectStats
 from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.maintenance.schedule import MaintenanceSchedule, open_schedule
@@ -33,8 +38,11 @@ from overseer.push.icinga2_push import Icinga2Push
 from overseer.routes import JsonRoute
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
+from overseer.serve.lifecycle import RELOAD_PATH, reload_route
 from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
+from overseer.serve.retire_api import RETIREMENTS_PATH, RetireApi
 from overseer.serve.web_config import load_web_config
+from overseer.serve.write_access import WriteAccess
 from overseer.sources import enabled_transports
 from overseer.sources.ros2 import require_rclpy
 
@@ -44,9 +52,16 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def open_fleet(config: Config, events: EventSink | None) -> LocalFleet | PooledFleet:
-    """The fleet `config` asks for: ingested in this process with one worker, by a pool with more."""
-    return LocalFleet.build(config, events) if config.ingest.workers == 1 else PooledFleet(config, events)
+def open_fleet(
+    config: Config, events: EventSink | None, start: Callable[[], FleetStart]
+) -> LocalFleet | PooledFleet:
+    """The fleet `config` asks for: ingested in this process with one worker, by a pool with more.
+
+    `start` tells what it follows before it hears anything (asked again for each worker restarted).
+    """
+    if config.ingest.workers == 1:
+        return LocalFleet.build(config, events, start())
+    return PooledFleet(config, events, start)
 
 
 @dataclass
@@ -57,6 +72,8 @@ class Exporter:
     fleet: Fleet = field(init=False)
     server: OverseerServer = field(init=False)
     maintenance: MaintenanceSchedule = field(init=False)
+    inventory: InventoryReloader = field(init=False)
+    memory: RobotMemory = field(init=False)
     history: EventHistory | None = None
     icinga2_push: Icinga2Push | None = None
     silences: AlertmanagerSilences | None = None
@@ -66,13 +83,20 @@ class Exporter:
         config = self.config
         # First: a web configuration that cannot load is a configuration error that must touch nothing.
         security = load_web_config(config.web.config_file)
+        self.inventory = InventoryReloader(config.inventory.file)  # so must a bad inventory file
         if config.events.enabled:
             self.history = EventHistory(config.events, config.log_format == "json")
         events = None if self.history is None else self.history.store.add
-        self.fleet = open_fleet(config, events)
+        self.memory = RobotMemory(RobotRegistry(config.events.path))
+        self.fleet = open_fleet(
+            config, events, lambda: FleetStart(self.inventory.inventory, self.memory.remembered())
+        )
+        self.inventory.follow_with(self.fleet.set_inventory)
         self.maintenance = open_schedule(config.maintenance, config.events.path, events)
         # Appended to /metrics after the fleet's series, in this order.
         extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
+        if config.inventory.file is not None:
+            extra_collectors.append(InventoryCollector(self.inventory))
         extra_collectors += self.fleet.collectors()
         extra_collectors.append(MaintenanceCollector(self.maintenance, self.robot_names))
         effects: list[EffectStats] = []
@@ -93,12 +117,14 @@ class Exporter:
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
-        maintenance_api = MaintenanceApi(
-            self.maintenance, config.maintenance.writers, config.web.enable_maintenance_api
-        )
+        access = WriteAccess(config.maintenance.writers, config.web.enable_maintenance_api)
+        maintenance_api = MaintenanceApi(self.maintenance, access)
+        retirements = Retirements(self.fleet, self.memory, events)
         routes: dict[str, JsonRoute] = {
             EVENTS_PATH: events_route(None if self.history is None else self.history.store),
             MAINTENANCE_PATH: maintenance_api.answer,
+            RETIREMENTS_PATH: RetireApi(retirements.retire, access).answer,
+            RELOAD_PATH: reload_route(self.inventory.reload, config.web.enable_lifecycle),
         }
         self.server = OverseerServer(
             config.web.host_and_port,
@@ -108,6 +134,10 @@ class Exporter:
             routes=routes,
             robot_documents=maintenance_api.with_maintenance,
         )
+
+    def reload(self) -> str | None:
+        """Read the inventory file again (SIGHUP, POST /-/reload): None when it was, else why not."""
+        return self.inventory.reload()
 
     def robot_names(self) -> list[str]:
         """The names of the robots the fleet follows now."""
@@ -134,6 +164,7 @@ class Exporter:
             if self.history is not None:
                 self.history.stop()
             raise
+        self.memory.start(self.fleet)
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
         log.info("serving on %s", self.server.url)
         if self.config.dds.enabled or self.config.zenoh.enabled or self.config.ros2.enabled:
@@ -166,7 +197,11 @@ class Exporter:
             steps.append(("Alertmanager silences", self.silences.stop))
         if self.ros2_fleet is not None:
             steps.append(("ROS 2 fleet publisher", self.ros2_fleet.stop))
-        steps += [("maintenance schedule", self.maintenance.stop), ("fleet", self.fleet.stop)]
+        steps += [
+            ("maintenance schedule", self.maintenance.stop),
+            ("robots heard", self.memory.stop),  # saved while the fleet still answers
+            ("fleet", self.fleet.stop),
+        ]
         if self.history is not None:
             steps.append(("event history", self.history.stop))
         clean = True

@@ -7,10 +7,16 @@ import sys
 from collections.abc import Sequence
 
 from overseer import __version__
-from overseer.commands import Command, demo, maintenance, run, simulate
+from overseer.commands import Command, demo, maintenance, robots, run, simulate
 from overseer.config import ConfigError
 
-COMMANDS: tuple[Command, ...] = (run.COMMAND, simulate.COMMAND, demo.COMMAND, maintenance.COMMAND)
+COMMANDS: tuple[Command, ...] = (
+    run.COMMAND,
+    simulate.COMMAND,
+    demo.COMMAND,
+    maintenance.COMMAND,
+    robots.COMMAND,
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

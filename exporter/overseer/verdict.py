@@ -59,7 +59,16 @@ class Maintenance:
 class ReportedRobot:
     """One robot as the exporter's JSON API reports it."""
 
-    __slots__ = ("components", "generated_at", "last_message", "maintenance", "name", "publisher_alive", "up")
+    __slots__ = (
+        "components",
+        "generated_at",
+        "last_message",
+        "listed",
+        "maintenance",
+        "name",
+        "publisher_alive",
+        "up",
+    )
 
     def __init__(
         self,
@@ -70,8 +79,10 @@ class ReportedRobot:
         components: list[ReportedComponent],
         publisher_alive: bool = True,
         maintenance: Maintenance | None = None,
+        listed: bool = False,
     ) -> None:
-        """Keep the fields; times are the exporter's unix times."""
+        """Keep the fields; times are the exporter's unix times; `listed` in the exporter's inventory."""
+        self.listed = listed
         self.publisher_alive = publisher_alive
         self.maintenance = maintenance
         self.name = name
@@ -209,10 +220,12 @@ def maintenance_text(maintenance: Maintenance) -> str:
 
 def down_text(robot: ReportedRobot) -> str:
     """Why a robot is down: its publisher left, silent for how long, or never heard from."""
+    if robot.last_message is None:
+        if robot.listed:
+            return "listed in the inventory, never heard"
+        return "the exporter knows it but never received its diagnostics"
     if not robot.publisher_alive:
         return "its diagnostics publisher left (the middleware said so)"
-    if robot.last_message is None:
-        return "the exporter knows it but never received its diagnostics"
     silent_seconds = max(0, round(robot.generated_at - robot.last_message))
     return f"no diagnostics received for {silent_seconds} s"
 

@@ -82,6 +82,10 @@ def test_every_alert_has_for_severity_summary_description_and_a_runbook_section(
         assert name.lower() in runbook_anchors, f"docs/runbook.md has no section for {name}"
 
 
+# The alerts of a robot that does not speak: they inhibit its other alerts, and list no components.
+ROBOT_DOWN_ALERTS = {"RosRobotDown", "RosRobotNeverHeard"}
+
+
 def robot_alerts(path: Any = DEFAULT_RULES) -> dict[str, dict[str, Any]]:
     """The alerts about one robot: those that link to its page on the status page."""
     return {name: rule for name, rule in alerts(path).items() if "status_page_url" in rule["annotations"]}
@@ -93,12 +97,13 @@ def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alo
         "RosRobotWarning",
         "RosRobotStale",
         "RosRobotDown",
+        "RosRobotNeverHeard",
         "RosRobotFlapping",
     }
     for name, rule in robot_alerts().items():
         annotations = rule["annotations"]
         assert "{{ $labels.robot }}" in annotations["summary"], name
-        if name == "RosRobotDown":
+        if name in ROBOT_DOWN_ALERTS:
             continue
         assert "/api/v1/robots/{{ $labels.robot }}" in annotations["description"], name
         queries = re.findall(r"printf `([^`]*)`", annotations["message"])
@@ -108,20 +113,37 @@ def test_robot_alerts_name_the_robot_and_list_its_components_from_that_robot_alo
                 assert "instance=%q,robot=%q" in selector.matchers, f"{name}: {selector}"
 
 
-def test_only_the_message_annotation_queries_and_the_robot_down_alert_not_at_all() -> None:
+def test_only_the_message_annotation_queries_and_the_robot_down_alerts_not_at_all() -> None:
     # Prometheus expands every annotation of every pending or firing alert at every evaluation: at fleet scale
     # each query there costs once per robot in trouble.
     for name, rule in alerts().items():
         for annotation, text in rule["annotations"].items():
             if annotation != "message":
                 assert "| query" not in text, f"{name} {annotation}"
-    assert "message" not in alerts()["RosRobotDown"]["annotations"]
+    for name in ROBOT_DOWN_ALERTS:
+        assert "message" not in alerts()[name]["annotations"], name
 
 
-def test_every_robot_alert_joins_the_one_per_robot_recording_rule() -> None:
-    # robot:overseer_web_info:external_url carries the link label; a robot it leaves out raises no alert.
+ALERT_LABELS = "robot:ros_diagnostics_robot_info:alert_labels"
+INVENTORY_LABELS = ("site", "model", "team")
+
+
+def test_every_robot_alert_takes_its_labels_from_the_one_per_robot_recording_rule() -> None:
+    # The rule carries the link label and the inventory labels; a robot it leaves out raises no alert.
+    join = f'* on (job, instance, robot) group_right {ALERT_LABELS}{{job="overseer"}}'
     for name, rule in robot_alerts().items():
-        assert "group_left (external_url) robot:overseer_web_info:external_url{" in rule["expr"], name
+        assert rule["expr"].endswith(join), name
+
+
+def test_the_inventory_labels_on_alerts_are_named_in_one_place_the_join_with_the_info_series() -> None:
+    (labels_rule,) = [rule for rule in load_rules(DEFAULT_RULES) if rule.get("record") == ALERT_LABELS]
+    copied = re.search(r"group_left \(([^)]*)\)\s*\(\s*ros_diagnostics_robot_info\{", labels_rule["expr"])
+    assert copied, labels_rule["expr"]
+    assert tuple(copied.group(1).split(", ")) == INVENTORY_LABELS
+    for rule in load_rules(DEFAULT_RULES):
+        if rule.get("record") != ALERT_LABELS:
+            named = [label for label in INVENTORY_LABELS if re.search(rf"\b{label}\b", rule["expr"])]
+            assert not named, f"{rule.get('alert') or rule['record']} names {named}"
 
 
 COMPONENT_SERIES = {"ros_diagnostics_level", "ros_diagnostics_level_changes_total", "ros_diagnostics_value"}
@@ -163,20 +185,34 @@ def test_fast_profile_is_the_default_profile_with_shorter_for() -> None:
         assert parse_duration(rule["for"]) < parse_duration(alerts()[name]["for"]), name
 
 
+def margin_and_intervals(config: str, alert: str) -> tuple[float, float]:
+    """How much sooner `alert` fires than RosRobotStale, and a scrape plus an evaluation, in `config` (s)."""
+    path = DEPLOY_PROMETHEUS / config
+    settings = yaml.safe_load(path.read_text(encoding="utf-8"))
+    (rule_file,) = settings["rule_files"]
+    rule = alerts(path.parent / rule_file)
+    margin = parse_duration(rule["RosRobotStale"]["for"]) - parse_duration(rule[alert]["for"])
+    intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
+        settings["global"]["evaluation_interval"]
+    )
+    return margin, intervals
+
+
 @pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
 def test_robot_down_fires_before_its_stale_alert(config: str) -> None:
     # A stopped robot's components turn STALE (stale_after 5s) before it counts as down (robot_timeout 10s).
     # RosRobotDown must still fire first, by more than that gap plus one scrape and one evaluation, so that
     # Alertmanager inhibits RosRobotStale before it sends it.
-    path = DEPLOY_PROMETHEUS / config
-    settings = yaml.safe_load(path.read_text(encoding="utf-8"))
-    (rule_file,) = settings["rule_files"]
-    rule = alerts(path.parent / rule_file)
-    margin = parse_duration(rule["RosRobotStale"]["for"]) - parse_duration(rule["RosRobotDown"]["for"])
-    intervals = parse_duration(settings["global"]["scrape_interval"]) + parse_duration(
-        settings["global"]["evaluation_interval"]
-    )
+    margin, intervals = margin_and_intervals(config, "RosRobotDown")
     assert margin > (10 - 5) + intervals
+
+
+@pytest.mark.parametrize("config", ["prometheus.yml", "prometheus-fast.yml"])
+def test_robot_never_heard_fires_before_its_stale_alert(config: str) -> None:
+    # A robot never heard is STALE from the scrape that first shows it: RosRobotNeverHeard must fire more than
+    # one scrape and one evaluation before RosRobotStale, so that Alertmanager inhibits RosRobotStale.
+    margin, intervals = margin_and_intervals(config, "RosRobotNeverHeard")
+    assert margin > intervals
 
 
 def test_amtool_accepts_the_alertmanager_example() -> None:
@@ -203,19 +239,72 @@ def test_every_alert_routes_to_the_receiver_of_its_severity(name: str) -> None:
     assert result.stdout.strip() == receiver
 
 
+def routes(route: dict[str, Any]) -> list[dict[str, Any]]:
+    """A route and every route beneath it."""
+    return [route, *(child for sub in route.get("routes", []) for child in routes(sub))]
+
+
 def test_alertmanager_groups_by_robot() -> None:
     config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
-    routes = [config["route"], *config["route"]["routes"]]
-    assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes)
+    assert config["route"]["group_by"] == ["robot"]
+    assert all(route.get("group_by", ["robot"]) == ["robot"] for route in routes(config["route"]))
 
 
-def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot() -> None:
+def equality(matcher: str) -> tuple[str, str]:
+    """The label and value an equality matcher such as `site="site_a"` asks for."""
+    parsed = _MATCHER.fullmatch(matcher)
+    assert parsed and parsed.group(2) == "=", f"not an equality matcher: {matcher}"
+    return parsed.group(1), parsed.group(3)
+
+
+def site_and_team_routes() -> list[tuple[str, tuple[str, str], str]]:
+    """(severity, (label, value), receiver) of every route beneath a severity route of the example."""
     config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
-    robot_down = {"alertname": "RosRobotDown", **alerts()["RosRobotDown"]["labels"]}
+    found = []
+    for parent in config["route"]["routes"]:
+        ((_, severity),) = [equality(matcher) for matcher in parent["matchers"]]
+        for child in parent.get("routes", []):
+            (matcher,) = child["matchers"]
+            found.append((severity, equality(matcher), child["receiver"]))
+    return found
+
+
+def test_the_example_routes_critical_alerts_by_site_and_warnings_by_team() -> None:
+    routed_by = {(severity, label) for severity, (label, _), _ in site_and_team_routes()}
+    assert routed_by == {("critical", "site"), ("warning", "team")}
+
+
+@pytest.mark.parametrize(("severity", "label", "receiver"), site_and_team_routes())
+def test_every_robot_alert_of_a_site_or_team_reaches_its_receiver(
+    severity: str, label: tuple[str, str], receiver: str
+) -> None:
+    inventory = {"site": "site_a", "model": "tb4", "team": "logistics"} | dict([label])
+    for name, rule in robot_alerts().items():
+        if rule["labels"]["severity"] != severity:
+            continue
+        result = run(
+            "amtool",
+            "config",
+            "routes",
+            "test",
+            f"--config.file={ALERTMANAGER_EXAMPLE}",
+            f"--verify.receivers={receiver}",
+            f"alertname={name}",
+            f"severity={severity}",
+            "robot=robot1",
+            *(f"{key}={value}" for key, value in inventory.items()),
+        )
+        assert result.returncode == 0, f"{name}: {result.stdout}{result.stderr}"
+
+
+@pytest.mark.parametrize("source", sorted(ROBOT_DOWN_ALERTS))
+def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot(source: str) -> None:
+    config = yaml.safe_load(ALERTMANAGER_EXAMPLE.read_text(encoding="utf-8"))
+    robot_down = {"alertname": source, **alerts()[source]["labels"]}
     inhibited = set()
     for rule in config["inhibit_rules"]:
         if all(matches(matcher, robot_down) for matcher in rule["source_matchers"]):
-            assert "robot" in rule["equal"]
+            assert {"instance", "robot"} <= set(rule["equal"])
             inhibited |= {
                 name
                 for name, alert in alerts().items()
@@ -224,7 +313,7 @@ def test_a_down_robot_inhibits_exactly_the_other_alerts_of_the_same_robot() -> N
                     for matcher in rule["target_matchers"]
                 )
             }
-    assert inhibited == set(robot_alerts()) - {"RosRobotDown"}
+    assert inhibited == set(robot_alerts()) - ROBOT_DOWN_ALERTS
 
 
 @pytest.mark.parametrize("rules", [DEFAULT_RULES, FAST_RULES], ids=lambda path: path.name)

@@ -11,6 +11,10 @@ By default it runs the fast profile's rules with 1s intervals and 1s Alertmanage
 quick. OVERSEER_E2E_PROFILE=fast or =default runs a shipped profile exactly as deployed (Prometheus intervals,
 rules, the Alertmanager example's timing, the exporter's default timeouts): that measures the numbers in
 bench/README.md and takes about 2 and 8 minutes.
+
+The last test gives the shipped Alertmanager example alerts labelled as the rules label them, with the
+inventory labels site, model and team: each reaches the receiver of its site or team, and a robot never heard
+inhibits its own other alerts and no other site's.
 """
 
 from __future__ import annotations
@@ -80,6 +84,7 @@ class Budget:
     warning_group_wait: float
     error_for: float
     down_for: float
+    never_heard: float
 
 
 def route_setting(config: dict[str, Any], severity: str, key: str) -> float:
@@ -114,6 +119,9 @@ def budget(prometheus: dict[str, Any], alertmanager: dict[str, Any], profile: Pr
         warning_group_wait=route_setting(alertmanager, "warning", "group_wait"),
         error_for=for_("RosRobotError"),
         down_for=for_("RosRobotDown"),
+        never_heard=for_("RosRobotNeverHeard")
+        + pipeline
+        + route_setting(alertmanager, "warning", "group_wait"),
     )
 
 
@@ -405,3 +413,77 @@ def test_a_robot_with_many_failing_components_notifies_once_listing_each_with_it
                 ("RosRobotError", "robot1"),
                 ("RosRobotError", "robot2"),
             }
+
+
+def test_alerts_reach_their_site_or_team_and_a_robot_never_heard_inhibits_only_its_own_alerts(
+    tmp_path: Path,
+) -> None:
+    # The shipped example on a real Alertmanager, given alerts labelled as the rules label them: two sites
+    # whose exporters have the same address each have a robot1, and only site_a's was never heard.
+    address = "overseer:9849"
+    never_heard = {"alertname": "RosRobotNeverHeard", "severity": "warning", "robot": "robot1"}
+    stale = {"alertname": "RosRobotStale", "severity": "warning", "robot": "robot1"}
+    unlisted = {"alertname": "RosRobotError", "severity": "critical", "robot": "robot3", "instance": address}
+    site_a = {"instance": address, "site": "site_a", "model": "tb4", "team": "logistics"}
+    site_b = {"instance": address, "site": "site_b", "model": "tb4", "team": "inspection"}
+    with running_webhook() as webhook:
+        config = example_config(webhook.url, {"group_wait": "1s", "group_interval": "1s"})
+        with running_alertmanager(tmp_path, config) as alertmanager:
+            alertmanager.post_alerts(
+                never_heard | site_a,
+                stale | site_a,
+                stale | site_b,
+                {"alertname": "RosRobotDown", "severity": "critical", "robot": "robot2"} | site_b,
+                unlisted,
+            )
+            expected = {
+                ("RosRobotNeverHeard", "robot1", "/team-logistics"),
+                ("RosRobotStale", "robot1", "/team-inspection"),
+                ("RosRobotDown", "robot2", "/site-b-oncall"),
+                ("RosRobotError", "robot3", "/fleet-critical"),
+            }
+
+            def notified() -> set[tuple[str, str, str]] | None:
+                found = {(a.labels["alertname"], a.labels["robot"], a.path) for a in webhook.alerts()}
+                return found if found >= expected else None
+
+            wait_for(notified, SLACK, message=f"notifications {expected}")
+            held = {
+                (alert["labels"]["alertname"], alert["labels"]["site"]): alert["status"]
+                for alert in alertmanager.alerts()
+                if alert["labels"]["robot"] == "robot1"
+            }
+            # Another round of the warning routes' batches, had the inhibition not held.
+            time.sleep(3)
+            received = {(a.labels["alertname"], a.labels["robot"], a.path) for a in webhook.alerts()}
+    assert held[("RosRobotStale", "site_a")]["state"] == "suppressed"
+    assert held[("RosRobotStale", "site_a")]["inhibitedBy"]
+    assert held[("RosRobotStale", "site_b")]["state"] == "active"
+    assert received == expected
+
+
+def test_a_listed_robot_never_heard_notifies_its_team_with_the_inventorys_labels(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    # The whole pipeline: the exporter reads an inventory with a robot that never comes up, Prometheus
+    # evaluates the shipped rules (RosRobotNeverHeard, the fast profile's for:) and Alertmanager routes it.
+    profile = PROFILES[PROFILE_NAME]
+    inventory = tmp_path / "inventory.yml"
+    inventory.write_text(
+        "robots:\n  ghost: {labels: {site: site_a, model: tb4, team: logistics}}\n", encoding="utf-8"
+    )
+    with running_webhook() as webhook:
+        alertmanager_config = example_config(webhook.url, profile.alertmanager_timing)
+        with alert_pipeline(
+            tmp_path, dds_domain, profile, webhook, alertmanager_config, f"--inventory.file={inventory}"
+        ) as pipeline:
+            alert = notification(
+                webhook, "firing", pipeline.limits.never_heard, alertname="RosRobotNeverHeard", robot="ghost"
+            )
+    assert alert.path == "/team-logistics"
+    assert {key: alert.labels[key] for key in ("site", "model", "team", "severity")} == {
+        "site": "site_a",
+        "model": "tb4",
+        "team": "logistics",
+        "severity": "warning",
+    }

@@ -1,5 +1,7 @@
 """The Grafana dashboards: valid against Grafana's schema, and every query answered by a live Prometheus.
 
+What the inventory variables select is checked by promtool on hand-written series, which need no exporter.
+
 The live half scrapes an exporter fed by the simulator with the shipped Prometheus config and rules, fills in
 the dashboard variables the way Grafana does, and runs every panel target and variable query.
 """
@@ -8,6 +10,7 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -34,6 +37,15 @@ EXPORT_ONLY_KEYS = ("__inputs", "__elements", "__requires")
 LEVEL_COLORS = {"OK": "green", "WARN": "yellow", "ERROR": "red", "STALE": "#8e8e8e"}
 LEVEL_MAPPING = {str(level): name for level, name in enumerate(LEVEL_COLORS)}
 RAW_LEVEL = re.compile(r"ros_diagnostics_(robot_)?level\{[^}]*\}(\s*[<>]=?\s*\d+)*")
+# The fleet inventory's labels, a variable each; a panel about robots keeps those the variables select: every
+# robot under All (ros_diagnostics_robot_up has none of those labels, and `=~".*"` matches an absent label),
+# else the robots whose ros_diagnostics_robot_info has one of the values chosen.
+INVENTORY_LABELS = ("site", "model", "team")
+INVENTORY_SELECTOR = (
+    '{__name__=~"ros_diagnostics_robot_info|ros_diagnostics_robot_up", job="overseer", '
+    'site=~"$site", model=~"$model", team=~"$team"}'
+)
+INVENTORY_FILTER = " and on (job, instance, robot) " + INVENTORY_SELECTOR
 # What Grafana puts for its built-in variables; the range covers the data the live Prometheus holds.
 BUILTIN_VARIABLES = {"__rate_interval": "1m", "__interval": "15s", "__range": "5m"}
 VARIABLE = re.compile(r"\$\{(\w+)(?::\w+)?\}|\$(\w+)")
@@ -80,6 +92,20 @@ def query_variables() -> list[tuple[str, dict[str, Any]]]:
     ]
 
 
+def variable_text(variable: dict[str, Any], chosen: list[str], everything: bool) -> str:
+    """What Grafana's Prometheus datasource puts for a variable.
+
+    That is its `allValue` when All is selected (`everything`) and it has one, else the values chosen (under
+    All, every value), regex-escaped and joined when the variable takes several.
+    """
+    if everything and "allValue" in variable:
+        return str(variable["allValue"])
+    if not (variable.get("multi") or variable.get("includeAll")):
+        return chosen[0]
+    escaped = [REGEX_SPECIAL.sub(r"\\\\\g<0>", value) for value in chosen]
+    return escaped[0] if len(escaped) == 1 else "(" + "|".join(escaped) + ")"
+
+
 def test_there_are_the_two_dashboards() -> None:
     assert [path.name for path in DASHBOARD_FILES] == ["fleet-overview.json", "robot-detail.json"]
 
@@ -114,7 +140,9 @@ def test_panels_showing_a_level_map_it_to_its_name_and_color(path: Path) -> None
     level_panels = [
         panel
         for panel in panels(load(path))
-        if any(RAW_LEVEL.fullmatch(target["expr"]) for target in panel["targets"])
+        if any(
+            RAW_LEVEL.fullmatch(target["expr"].removesuffix(INVENTORY_FILTER)) for target in panel["targets"]
+        )
     ]
     assert level_panels
     for panel in level_panels:
@@ -138,6 +166,149 @@ def test_series_named_after_a_level_have_its_color(path: Path) -> None:
             for name in override["matcher"]["options"]["names"]
         }
         assert colors == LEVEL_COLORS, panel["title"]
+
+
+@pytest.mark.parametrize("path", DASHBOARD_FILES, ids=lambda path: path.name)
+def test_the_inventory_labels_are_variables_whose_all_matches_robots_without_them(path: Path) -> None:
+    variables = {variable["name"]: variable for variable in load(path)["templating"]["list"]}
+    for label in INVENTORY_LABELS:
+        variable = variables[label]
+        assert variable["query"] == f'label_values(ros_diagnostics_robot_info{{job="overseer"}}, {label})'
+        assert variable["multi"] and variable["includeAll"], label
+        # Grafana's own All is the list of values found, which misses the robots without the label.
+        assert variable["allValue"] == ".*", label
+        assert variable["current"] == {"text": ["All"], "value": ["$__all"]}, label
+
+
+def test_every_fleet_panel_about_robots_shows_the_robots_the_inventory_variables_select() -> None:
+    for panel in panels(load(DASHBOARDS / "fleet-overview.json")):
+        for target in panel["targets"]:
+            read = {selector.metric for selector in selectors(target["expr"])}
+            if read <= {"overseer_messages_total", "overseer_statuses_dropped_total"}:
+                continue  # the exporter's own counters: no robot to filter
+            assert INVENTORY_FILTER in target["expr"], f"{panel['title']}: {target['expr']}"
+
+
+def test_the_robot_detail_offers_the_robots_the_inventory_variables_select() -> None:
+    variables = {v["name"]: v for v in load(DASHBOARDS / "robot-detail.json")["templating"]["list"]}
+    assert variables["robot"]["query"] == f"label_values({INVENTORY_SELECTOR}, robot)"
+    names = list(variables)
+    assert all(names.index(label) < names.index("robot") for label in INVENTORY_LABELS)
+
+
+def test_links_to_the_robot_detail_keep_the_inventory_variables() -> None:
+    text = (DASHBOARDS / "fleet-overview.json").read_text(encoding="utf-8")
+    links = re.findall(r'"url": "(/d/overseer-robot/[^"]*)"', text)
+    assert links
+    for link in links:
+        assert all(f"${{{label}:queryparam}}" in link for label in INVENTORY_LABELS), link
+
+
+# A fleet for promtool: robots listed with labels, one listed without, one of an exporter with no inventory.
+FILTER_FLEET = {
+    "a1": ({"site": "site_a", "model": "tb4", "team": "logistics"}, 2),
+    "a2": ({"site": "site_a", "model": "tb3", "team": "inspection"}, 0),
+    "b1": ({"site": "site_b", "model": "tb4", "team": "logistics"}, 2),
+    "unlabelled": ({}, 2),
+    "old": (None, 1),
+}
+
+
+def filter_fleet_series() -> list[dict[str, str]]:
+    """The input series of FILTER_FLEET: each robot's level, up, info (unless None) and one component."""
+    series = []
+    for robot, (labels, level) in FILTER_FLEET.items():
+        own = f'job="overseer", instance="overseer:9849", robot="{robot}"'
+        series += [
+            {"series": f"ros_diagnostics_robot_level{{{own}}}", "values": f"{level}x8"},
+            {"series": f"ros_diagnostics_robot_up{{{own}}}", "values": "1x8"},
+            {
+                "series": f'ros_diagnostics_level{{{own}, component="/Laser", hardware_id=""}}',
+                "values": f"{level}x8",
+            },
+        ]
+        if labels is not None:
+            inventory = "".join(f', {name}="{value}"' for name, value in labels.items())
+            series.append({"series": f"ros_diagnostics_robot_info{{{own}{inventory}}}", "values": "1x8"})
+    return series
+
+
+# (site, model, team) chosen, None for All → the robots the fleet overview shows.
+SELECTIONS = [
+    ((None, None, None), {"a1", "a2", "b1", "unlabelled", "old"}),
+    ((["site_a"], None, None), {"a1", "a2"}),
+    ((["site_a", "site_b"], None, None), {"a1", "a2", "b1"}),
+    ((None, ["tb4"], ["logistics"]), {"a1", "b1"}),
+    ((["site_b"], None, ["inspection"]), set()),
+]
+
+
+@pytest.mark.parametrize(
+    ("chosen", "shown"), SELECTIONS, ids=["all", "site_a", "two_sites", "tb4_logistics", "nobody"]
+)
+def test_promtool_shows_the_robots_and_counts_of_the_sites_models_and_teams_chosen(
+    tmp_path: Path, chosen: tuple[list[str] | None, ...], shown: set[str]
+) -> None:
+    variables = {v["name"]: v for v in load(DASHBOARDS / "fleet-overview.json")["templating"]["list"]}
+    choice = dict(zip(INVENTORY_LABELS, chosen, strict=True))
+
+    def replace(match: re.Match[str]) -> str:
+        name = match.group(1) or match.group(2)
+        values = choice[name]
+        if values is None:  # All: every value label_values() finds, as Grafana has them
+            found = {labels[name] for labels, _ in FILTER_FLEET.values() if labels and name in labels}
+            return variable_text(variables[name], sorted(found), everything=True)
+        return variable_text(variables[name], values, everything=False)
+
+    def expr(panel_title: str, ref: str) -> str:
+        (target,) = [
+            t
+            for file, title, t in TARGETS
+            if file == "fleet-overview.json" and title == panel_title and t["refId"] == ref
+        ]
+        return VARIABLE.sub(replace, target["expr"])
+
+    in_error = [robot for robot in shown if FILTER_FLEET[robot][1] == 2]
+    own = 'job="overseer", instance="overseer:9849"'
+    test = {
+        "rule_files": [str(REPO / "alert_rules" / "overseer.rules.yml")],
+        "evaluation_interval": "15s",
+        "tests": [
+            {
+                "interval": "15s",
+                "input_series": filter_fleet_series(),
+                "promql_expr_test": [
+                    {
+                        "expr": expr("Robots", "A"),
+                        "eval_time": "1m",
+                        "exp_samples": [
+                            {
+                                "labels": f'ros_diagnostics_robot_level{{{own}, robot="{robot}"}}',
+                                "value": FILTER_FLEET[robot][1],
+                            }
+                            for robot in sorted(shown)
+                        ],
+                    },
+                    {
+                        "expr": expr("Robots by level", "A"),
+                        "eval_time": "1m",
+                        "exp_samples": [{"labels": "{}", "value": len(in_error)}],
+                    },
+                    {
+                        "expr": expr("Components by level", "A"),
+                        "eval_time": "1m",
+                        "exp_samples": [{"labels": "{}", "value": len(in_error)}],
+                    },
+                ],
+            }
+        ],
+    }
+    path = tmp_path / "dashboard.test.yml"
+    path.write_text(yaml.safe_dump(test), encoding="utf-8")
+    result = subprocess.run(
+        ["promtool", "test", "rules", str(path)], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
 
 
 def test_provisioning_makes_a_prometheus_the_default_datasource() -> None:
@@ -178,19 +349,18 @@ class LiveFleet:
         return values
 
     def substitute(self, expr: str, dashboard_file: str, values: dict[str, list[str]]) -> str:
-        """`expr` with variables replaced the way Grafana's Prometheus datasource does."""
+        """`expr` with variables at their defaults, replaced the way Grafana's Prometheus datasource does.
+
+        A variable that includes All is at All; any other at its first value.
+        """
         variables = {v["name"]: v for v in load(DASHBOARDS / dashboard_file)["templating"]["list"]}
 
         def replace(match: re.Match[str]) -> str:
             name = match.group(1) or match.group(2)
             if name in BUILTIN_VARIABLES:
                 return BUILTIN_VARIABLES[name]
-            chosen = values[name]
             variable = variables[name]
-            if not (variable.get("multi") or variable.get("includeAll")):
-                return chosen[0]
-            escaped = [REGEX_SPECIAL.sub(r"\\\\\g<0>", value) for value in chosen]
-            return escaped[0] if len(escaped) == 1 else "(" + "|".join(escaped) + ")"
+            return variable_text(variable, values[name], bool(variable.get("includeAll")))
 
         return VARIABLE.sub(replace, expr)
 
@@ -216,7 +386,8 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
     """Three simulated robots with one ERROR and one WARN component each; robot1 has a stale one too.
 
     robot1 is in maintenance all day, by two recurring windows of the configuration, for the panels that
-    show maintenance.
+    show maintenance. The inventory gives robot1 and robot2 a site, a model and a team, and leaves robot3
+    out, for the dashboards' variables and the panels filtered by them.
     """
     tmp_path = tmp_path_factory.mktemp("dashboards")
     domain = fresh_domain_id()
@@ -224,8 +395,18 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
         {"robots": "robot1", "from": "00:00", "to": "12:00"},
         {"robots": "robot1", "from": "12:00", "to": "00:00"},
     ]
+    inventory = tmp_path / "inventory.yml"
+    inventory.write_text(
+        "robots:\n"
+        "  robot1: {labels: {site: site_a, model: tb4, team: logistics}}\n"
+        "  robot2: {labels: {site: site_b, model: tb4, team: inspection}}\n",
+        encoding="utf-8",
+    )
     config_file = tmp_path / "overseer.yml"
-    config_file.write_text(json.dumps({"maintenance": {"windows": all_day}}), encoding="utf-8")
+    config_file.write_text(
+        json.dumps({"maintenance": {"windows": all_day}, "inventory": {"file": str(inventory)}}),
+        encoding="utf-8",
+    )
     # A component that goes stale for the stale panels, and level changes for the level-change graphs.
     events = ["--event=2:robot1:/Temp/Sensor1:silence", "--event=3:robot1:/Motor/Motor1:WARN"]
     events += ["--event=5:robot1:/Motor/Motor1:OK"]

@@ -47,7 +47,7 @@ def test_help_documents_every_option_and_exits_unknown(capsys: pytest.CaptureFix
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        ([], "UNKNOWN - no robot given: use -r/--robot (see --help)"),
+        ([], "UNKNOWN - no robot given: use -r/--robot, or --label for a group (see --help)"),
         (["-r", "robot1", "--bogus"], "UNKNOWN - option --bogus not recognized (see --help)"),
         (["-r", "robot1", "extra"], "UNKNOWN - unexpected argument 'extra' (see --help)"),
         (["-r", "robot1", "-p", "99999"], "UNKNOWN - invalid port '99999': give a number from 1 to 65535"),

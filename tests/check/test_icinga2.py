@@ -15,6 +15,7 @@ import pytest
 from overseer.check.plugin import LONG_OPTIONS
 from support.check_cases import CASES, CheckCase, assert_matches_golden
 from testbed.icinga2 import Icinga2, icinga2, running_icinga2, write_icinga2_config
+from testbed.in_process import in_process_exporter, publish
 from testbed.nagios import PluginResult, running_fleet
 from testbed.ports import fresh_domain_id
 from testbed.processes import wait_for
@@ -26,7 +27,7 @@ def robot_hosts(exporter_port: int) -> str:
     """Hosts robot1..robot4 as an operator would define them, all with every shipped subsystem.
 
     robot2 has no vars.ros_robot and an explicit service instead of the apply rule, so the
-    CheckCommand must fall back to the host name.
+    CheckCommand must fall back to the host name. A host for site_a gets the site's group service.
     """
     hosts = []
     for number in (1, 2, 3, 4):
@@ -44,6 +45,10 @@ def robot_hosts(exporter_port: int) -> str:
     hosts.append(
         'object Service "ros-diagnostics" {\n\thost_name = "robot2"\n\timport "ros-diagnostics"\n}\n'
     )
+    hosts.append(
+        f'object Host "site_a" {{\n\tcheck_command = "dummy"\n\tvars.ros_site = "site_a"\n'
+        f'\tvars.ros_diagnostics_address = "127.0.0.1"\n\tvars.ros_diagnostics_port = {exporter_port}\n}}\n'
+    )
     return "\n".join(hosts)
 
 
@@ -59,9 +64,35 @@ def validate(root: Path, objects: str) -> str:
 def test_icinga2_accepts_the_shipped_definitions_without_warnings(tmp_path: Path) -> None:
     output = validate(tmp_path, robot_hosts(9849))
     assert not re.search(r"\b(warning|critical)/", output), output
-    assert (
-        "Instantiated 13 Services." in output
-    )  # 4 robots x (overall + 3 subsystems), robot2 without subsystems
+    # 4 robots x (overall + 3 subsystems), robot2 without subsystems, and the site's group service
+    assert "Instantiated 14 Services." in output
+
+
+SITE_HOST = """object Host "site_a" {
+	check_command = "dummy"
+	vars.ros_site = "site_a"
+	vars.ros_diagnostics_url = "%s"
+}
+"""
+
+
+def test_a_site_host_gets_one_service_that_judges_the_sites_robots_as_a_group(tmp_path: Path) -> None:
+    inventory = tmp_path / "inventory.yml"
+    inventory.write_text(
+        "robots:\n  site_a/r1: {labels: {site: site_a}}\n  site_a/r2: {labels: {site: site_a}}\n",
+        encoding="utf-8",
+    )
+    with in_process_exporter(tmp_path, inventory={"file": str(inventory)}) as running:
+        publish(running, "site_a/r1", (2, "/Laser", "no scans"))
+        with running_icinga2(tmp_path / "icinga2", SITE_HOST % running.server.url) as daemon:
+            result = wait_for(
+                lambda: settled_result(daemon, "site_a", "ros-site", 2),
+                timeout=60,
+                message="the site's result",
+            )
+    assert result.output.startswith(
+        "CRITICAL - 2 robots with site=site_a: site_a/r1 (1 ERROR) (also 1 UNKNOWN)"
+    )
 
 
 def test_icinga2_accepts_the_shipped_definitions_with_no_robots(tmp_path: Path) -> None:

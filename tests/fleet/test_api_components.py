@@ -19,7 +19,7 @@ from overseer.fleet.documents import (
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
-from overseer.serve.api_query import ComponentQueryError, parse_component_query
+from overseer.serve.api_query import ApiQueryError, parse_component_query
 from overseer.serve.http import OverseerServer
 from testbed.model_server import serving
 
@@ -92,6 +92,7 @@ def test_no_filter_lists_every_component_worst_first_then_by_robot_and_name(
         "state": "ERROR",
         "message": "No scans received",
         "last_update": 1_700_000_001.0,
+        "reported": True,
     }
 
 
@@ -169,7 +170,7 @@ def test_query_parameters_are_parsed_from_names_numbers_and_lists() -> None:
 def test_bad_parameters_are_refused_naming_the_parameter_and_value(
     params: dict[str, list[str]], message: str
 ) -> None:
-    with pytest.raises(ComponentQueryError) as raised:
+    with pytest.raises(ApiQueryError) as raised:
         parse_component_query(params)
     assert str(raised.value) == message
 

@@ -12,7 +12,7 @@ from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels,
 from overseer.fleet.metric_values import numeric_value
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.model import FleetLimits, FleetModel
+from overseer.model import Expectation, FleetLimits, FleetModel, Inventory, ListedRobot
 from overseer.serve.exposition_formats import OPENMETRICS
 from support.oracle import parse_openmetrics
 from support.paths import GOLDEN
@@ -80,9 +80,21 @@ PAPER_FLEET = {
 }
 
 
+# robot7 is listed with labels and a component it does not report; robot9 is listed and never heard.
+INVENTORY = Inventory(
+    {
+        "site_a/robot7": ListedRobot(
+            (("model", "tb4"), ("site", 'site "a"')), (Expectation("/Power/Battery", exact="/Power/Battery"),)
+        ),
+        "site_a/robot9": ListedRobot((("site", "site_a"),)),
+    }
+)
+
+
 @pytest.mark.parametrize("openmetrics", [False, True], ids=["text", "openmetrics"])
 def test_exposition_matches_golden_file(openmetrics: bool) -> None:
     rendering, model, clock = fleet_rendering(PAPER_FLEET)
+    model.set_inventory(INVENTORY)
     clock.now += 6
     model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0],)), "dds")
     model.count_message("dds", "decode_error")

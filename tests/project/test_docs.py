@@ -46,16 +46,17 @@ def documents_text() -> str:
     return "\n".join(path.read_text(encoding="utf-8") for path in DOCUMENTS if path.is_file())
 
 
-def command_flags() -> Iterator[tuple[str, str]]:
-    """(command, long flag) for every long flag of every `overseer` command."""
-    subparsers = next(
-        action for action in parser_of(COMMANDS)._actions if isinstance(action, argparse._SubParsersAction)
-    )
-    for name, parser in subparsers.choices.items():
-        for action in parser._actions:
-            for flag in action.option_strings:
-                if flag.startswith("--") and flag != "--help":
-                    yield name, flag
+def command_flags(
+    parser: argparse.ArgumentParser | None = None, command: str = "overseer"
+) -> Iterator[tuple[str, str]]:
+    """(command, long flag) for every long flag of every `overseer` command and action."""
+    for action in (parser or parser_of(COMMANDS))._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, subparser in action.choices.items():
+                yield from command_flags(subparser, f"{command} {name}")
+        for flag in action.option_strings:
+            if flag.startswith("--") and flag not in ("--help", "--version"):
+                yield command, flag
 
 
 def test_there_are_the_documents_the_readme_sends_a_reader_to() -> None:
@@ -76,7 +77,7 @@ def test_the_readme_shows_the_status_page() -> None:
 
 @pytest.mark.parametrize("command, flag", sorted(set(command_flags())))
 def test_every_flag_of_every_command_is_documented(command: str, flag: str) -> None:
-    assert re.search(re.escape(flag) + r"(?![a-z0-9_.-])", documents_text()), f"overseer {command} {flag}"
+    assert re.search(re.escape(flag) + r"(?![a-z0-9_.-])", documents_text()), f"{command} {flag}"
 
 
 @pytest.mark.parametrize("flag", sorted(LONG_OPTIONS))
@@ -130,7 +131,7 @@ def test_every_metric_an_exporter_with_every_output_serves_is_documented(tmp_pat
 
 def slug(heading: str) -> str:
     """The anchor GitHub gives a heading: lower case, punctuation dropped, spaces to hyphens."""
-    text = re.sub(r"[`*_]|\[([^\]]*)\]\([^)]*\)", r"\1", heading).strip().lower()
+    text = re.sub(r"[`*]|\[([^\]]*)\]\([^)]*\)", r"\1", heading).strip().lower()  # markup, not text
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 
 

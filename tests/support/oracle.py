@@ -77,6 +77,10 @@ class OracleCollector(Collector):
             period = learned_period(robot)
             if period is not None:
                 add(contract.PERIOD, [robot.name], round(period, 3))
+            inventory_labels = dict(robot.listing.labels) if robot.listing is not None else {}
+            families[contract.ROBOT_INFO.name].add_sample(
+                contract.ROBOT_INFO.name, {"robot": robot.name, **inventory_labels}, 1.0
+            )
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
                 level = snapshot.component_level(robot, key, component, up)
@@ -95,6 +99,8 @@ class OracleCollector(Collector):
         add(contract.STRINGS_TRUNCATED, [], float(snapshot.truncated_strings))
         for (transport, reason), count in sorted(snapshot.source_errors.items()):
             add(contract.SOURCE_ERRORS, [transport, reason], float(count))
+        for reason in contract.FORGET_REASONS:
+            add(contract.ROBOTS_FORGOTTEN, [reason], float(snapshot.forgotten_counts.get(reason, 0)))
         add(contract.BUILD_INFO, [__version__, compiled.implementation()], 1.0)
         if self._external_url is not None:
             add(contract.WEB_INFO, [self._external_url], 1.0)

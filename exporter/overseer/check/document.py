@@ -28,6 +28,8 @@ def robot_from_document(document: object) -> ReportedRobot:
         publisher_alive="publisher_alive" not in document or flag_field(document, "publisher_alive"),
         # Absent from exporters before maintenance windows, null for a robot in none.
         maintenance=maintenance_from_document(document.get("maintenance")),
+        # Absent from exporters before the inventory.
+        listed="listed" in document and flag_field(document, "listed"),
     )
 
 

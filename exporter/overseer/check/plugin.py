@@ -1,4 +1,4 @@
-"""check_ros_diagnostics: a Monitoring Plugins check of one robot, read from the exporter's JSON API.
+"""check_ros_diagnostics: a Monitoring Plugins check of one robot (or a group by label) from the JSON API.
 
 It starts once per check, so it imports only cheap standard modules (no argparse or getopt; a socket
 rather than urllib: see `overseer.client.http`) and none of the exporter; bench/bench_check.py measures it.
@@ -27,6 +27,8 @@ USAGE = f"""Usage:
    [-n <text>] [--name-regex <regex>] [--stale-state unknown|warning|critical] [--perfdata-values]
    [--authorization-file <file> | -a <user:password>] [--ca-file <file>] [--insecure]
    [--client-cert <file> [--client-key <file>]] [-t <seconds>] [-v] [-V] [-h]
+ {PROGRAM} [-H <exporter host>] [-p <port>] | [--url <exporter URL>]  --label <name=value> [--label ...]
+   [--stale-state unknown|warning|critical] [...]
  {PROGRAM} --ros-master <ROS 1 master URL> [--ros-topic diagnostics_agg|diagnostics] [-r <robot>] [...]"""
 
 HELP = f"""{PROGRAM} {__version__} (Overseer)
@@ -50,6 +52,9 @@ Options:
  -r, --robot=NAME
     The robot as the exporter names it (its ROS namespace, e.g. robot1 or site_a/robot7). With
     --ros-master it defaults to the master's host (10.0.0.5), as `overseer run --ros-master` names it
+ --label=NAME=VALUE
+    Without -r: judge every robot the exporter's inventory gives this label (e.g. site=site_a), as one
+    group: the worst robot's state, the robots listed by state; repeat to ask for several labels
  --ros-master=URL
     No exporter: read one message straight from a ROS 1 robot's master and publisher, as the
     paper's plugin did (e.g. http://10.0.0.5:11311); same output, waits at most --timeout
@@ -113,7 +118,9 @@ LONG_OPTIONS = {
     "--verbose": False,
     "--ros-master": True,
     "--ros-topic": True,
+    "--label": True,
 }
+REPEATABLE = "--label"  # its values are kept, joined by a NUL, not replaced
 _SHORT_OPTIONS = {
     "-h": "--help",
     "-V": "--version",
@@ -131,7 +138,17 @@ _STALE_STATES = {"unknown": UNKNOWN, "warning": WARNING, "critical": CRITICAL}
 class Options:
     """What the command line asks for."""
 
-    __slots__ = ("authorization", "robot", "ros_master", "ros_topic", "settings", "timeout", "tls", "url")
+    __slots__ = (
+        "authorization",
+        "labels",
+        "robot",
+        "ros_master",
+        "ros_topic",
+        "settings",
+        "timeout",
+        "tls",
+        "url",
+    )
 
     def __init__(
         self,
@@ -143,9 +160,14 @@ class Options:
         tls: Tls,
         ros_master: str = "",
         ros_topic: str = "diagnostics_agg",
+        labels: tuple[str, ...] = (),
     ) -> None:
-        """Keep the fields; `url` is the exporter's base URL without a trailing '/', '' with `ros_master`."""
+        """Keep the fields; `url` is the exporter's base URL without a trailing '/', '' with `ros_master`.
+
+        `labels` (NAME=VALUE) choose a group of robots to judge instead of `robot` ('' then).
+        """
         self.url = url
+        self.labels = labels
         self.robot = robot
         self.settings = settings
         self.timeout = timeout
@@ -189,7 +211,7 @@ def parse_flags(argv: list[str]) -> tuple[dict[str, str], int]:
     pending = argv[::-1]
     while pending:
         for name, value in split_argument(pending.pop(), pending):
-            flags[name] = value
+            flags[name] = flags[name] + "\0" + value if name == REPEATABLE and name in flags else value
             if name == "--verbose":
                 verbosity += 1
     return flags, verbosity
@@ -227,12 +249,15 @@ def next_value(option: str, pending: list[str]) -> str:
 def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
     """Validated options; CheckError naming the first bad one."""
     robot = flags.get("--robot", "")
+    labels = tuple(flags["--label"].split("\0")) if "--label" in flags else ()
     if not robot and flags.get("--ros-master"):
         from overseer.ros_master import master_host
 
         robot = master_host(flags["--ros-master"])
-    if not robot:
-        raise CheckError("no robot given: use -r/--robot (see --help)")
+    if labels:
+        check_group_flags(flags, labels)
+    elif not robot:
+        raise CheckError("no robot given: use -r/--robot, or --label for a group (see --help)")
     settings = Settings(
         name=flags.get("--name", ""),
         name_regex=compile_regex(flags.get("--name-regex", "")),
@@ -263,7 +288,20 @@ def options_from_flags(flags: dict[str, str], verbosity: int) -> Options:
         ),
         ros_master=ros_master,
         ros_topic=ros_topic,
+        labels=labels,
     )
+
+
+def check_group_flags(flags: dict[str, str], labels: tuple[str, ...]) -> None:
+    """CheckError when `--label` is given with what only judges one robot, or a label is not NAME=VALUE."""
+    for label in labels:
+        name, equals, _ = label.partition("=")
+        if not equals or not name:
+            raise CheckError(f"invalid --label {label!r}: use NAME=VALUE, e.g. site=site_a")
+    one_robot = ("--robot", "--name", "--name-regex", "--perfdata-values", "--ros-master")
+    given = [flag for flag in one_robot if flag in flags]
+    if given:
+        raise CheckError(f"--label judges a group of robots, not their components: drop {', '.join(given)}")
 
 
 def compile_regex(pattern: str) -> re.Pattern[str] | None:
@@ -295,6 +333,8 @@ def check(options: Options) -> tuple[int, str]:
     client = ExporterClient(
         options.url, options.timeout, options.authorization, options.tls, f"{PROGRAM}/{__version__}"
     )
+    if options.labels:
+        return check_group(client, options)
     url = client.url_of(ROBOTS_PATH, options.robot)
     answer = client.get(ROBOTS_PATH, options.robot)
     check_status(answer, url, options)
@@ -309,6 +349,29 @@ def check(options: Options) -> tuple[int, str]:
     verdict = judge(robot, settings)
     text = plugin_output(verdict, settings.verbosity)
     if settings.verbosity > 1:
+        text += f"\nRead {url} (HTTP {answer.status}, {len(answer.body)} bytes)"
+    return verdict.state, text
+
+
+def check_group(client: ExporterClient, options: Options) -> tuple[int, str]:
+    """Read the robots carrying every label asked for and judge them as one group."""
+    from urllib.parse import quote  # only a group check pays for these
+
+    from overseer.check.group import judge_group, summaries_from_document
+
+    query = "&".join("label=" + quote(label, safe="=") for label in options.labels)
+    url = client.url_of(ROBOTS_PATH) + "?" + query
+    answer = client.get(ROBOTS_PATH + "?" + query)
+    check_status(answer, url, options)
+    try:
+        robots, generated_at = summaries_from_document(api_reader.loads(answer.body))
+    except ValueError as error:
+        raise CheckError(f"malformed JSON from {url}: {error}") from None
+    except CheckError as error:
+        raise CheckError(f"unexpected answer from {url}: {error}") from None
+    verdict = judge_group(robots, ", ".join(options.labels), options.settings.stale_state, generated_at)
+    text = plugin_output(verdict, options.settings.verbosity)
+    if options.settings.verbosity > 1:
         text += f"\nRead {url} (HTTP {answer.status}, {len(answer.body)} bytes)"
     return verdict.state, text
 

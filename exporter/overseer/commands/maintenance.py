@@ -1,8 +1,6 @@
 """`overseer maintenance start|list|end`: maintenance windows through a running exporter's API.
 
-It reaches the exporter through `overseer.client`, with the options `check_ros_diagnostics` has for the
-address, TLS and basic auth (and the same `CHECK_ROS_DIAGNOSTICS_AUTH` variable), so a monitoring host
-that runs the check can open a window too.
+It reaches the exporter through `overseer.client`, with the options of `exporter_options`.
 """
 
 from __future__ import annotations
@@ -14,10 +12,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from overseer import __version__
-from overseer.client.exporter import ExporterClient, credentials, exporter_url, timeout_seconds
-from overseer.client.http import ClientError, Tls, quote_path
+from overseer.client.exporter import ExporterClient
+from overseer.client.http import ClientError, quote_path
 from overseer.commands import Command
+from overseer.commands.exporter_options import add_exporter_options, client_of
 
 PATH = "/api/v1/maintenance"
 
@@ -37,39 +35,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     end = actions.add_parser("end", help="end one-off windows now")
     end.add_argument("windows", nargs="+", metavar="ID", help="a window's id, as list shows it (w12)")
     for action in (start, listing, end):
-        _add_exporter_options(action)
-
-
-def _add_exporter_options(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("exporter (the same options as check_ros_diagnostics)")
-    group.add_argument("-H", "--hostname", default="", help="exporter host (default: 127.0.0.1)")
-    group.add_argument("-p", "--port", default="", help="exporter port (default: 9849)")
-    group.add_argument("--url", default="", help="exporter base URL instead of -H/-p")
-    group.add_argument("--authorization-file", default="", metavar="FILE", help="first line USER:PASSWORD")
-    group.add_argument("-a", "--authorization", default="", metavar="USER:PASSWORD")
-    group.add_argument("--ca-file", default="", metavar="FILE", help="CA to verify an https exporter with")
-    group.add_argument("--insecure", action="store_true", help="do not verify the exporter's certificate")
-    group.add_argument("--client-cert", default="", metavar="FILE", help="client certificate (mutual TLS)")
-    group.add_argument("--client-key", default="", metavar="FILE", help="its key, when in a file of its own")
-    group.add_argument("-t", "--timeout", default="10", metavar="SECONDS", help="give up after (default 10)")
-    group.add_argument("--json", action="store_true", help="print the exporter's JSON answers as they are")
-
-
-def client_of(args: argparse.Namespace) -> ExporterClient:
-    """The client the options describe; ClientError naming the first bad one."""
-    return ExporterClient(
-        exporter_url(args.url, args.hostname, args.port),
-        timeout_seconds(args.timeout),
-        credentials(args.authorization_file, args.authorization),
-        Tls(args.ca_file, args.insecure, args.client_cert, args.client_key),
-        f"overseer-maintenance/{__version__}",
-    )
+        add_exporter_options(action)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run one action; 0 when the exporter did all of it, 1 otherwise (said on stderr)."""
     try:
-        client = client_of(args)
+        client = client_of(args, "maintenance")
         if args.action == "list":
             return _list(client, args.active, args.json)
         if args.action == "start":

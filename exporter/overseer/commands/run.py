@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     except WorkerStartError as error:
         print(f"overseer run: {error}", file=sys.stderr)
         return 1
-    wait_for_signal()
+    wait_for_signal(exporter.reload)
     if not exporter.stop():
         return 1
     log.info("stopped")

@@ -43,8 +43,9 @@ OPTIONS: tuple[Option, ...] = (
     ),
     option(
         "fleet.expire_after",
-        "1h",
-        "a robot or component silent for this long is forgotten; not shorter than robot_timeout",
+        "7d",
+        "a robot not in the inventory, or a component it does not expect, silent for this long is forgotten "
+        "(an event says so); not shorter than robot_timeout",
         metavar="DURATION",
     ),
     option(

@@ -20,6 +20,7 @@ from overseer.config import (
     fleet,
     icinga2,
     ingest,
+    inventory,
     maintenance,
     metrics,
     ros1,
@@ -34,6 +35,7 @@ from overseer.config.events import EventsConfig
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.icinga2 import Icinga2Config
 from overseer.config.ingest import IngestConfig
+from overseer.config.inventory import InventoryConfig
 from overseer.config.maintenance import MaintenanceConfig
 from overseer.config.metrics import MetricsConfig
 from overseer.config.options import Option, option
@@ -48,7 +50,19 @@ from overseer.model.shard import Shard
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
-_SECTIONS = {"web", "dds", "ros1", "zenoh", "ros2", "fleet", "metrics", "ingest", "events", "maintenance"}
+_SECTIONS = {
+    "web",
+    "dds",
+    "ros1",
+    "zenoh",
+    "ros2",
+    "fleet",
+    "inventory",
+    "metrics",
+    "ingest",
+    "events",
+    "maintenance",
+}
 _TOP_LEVEL_KEYS = {"shard", "log_level", "log_format", "icinga2", "alertmanager"}
 TOP_LEVEL_OPTIONS: tuple[Option, ...] = (
     option(
@@ -74,6 +88,7 @@ ALL_OPTIONS: tuple[Option, ...] = (
     *zenoh.OPTIONS,
     *ros1.OPTIONS,
     *fleet.OPTIONS,
+    *inventory.OPTIONS,
     *TOP_LEVEL_OPTIONS,
     *ingest.OPTIONS,
     *metrics.OPTIONS,
@@ -94,6 +109,7 @@ class Config:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     ros2: Ros2Config = field(default_factory=Ros2Config)
     fleet: FleetLimits = field(default_factory=FleetLimits)
+    inventory: InventoryConfig = field(default_factory=InventoryConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     shard: Shard = field(default_factory=Shard)
     ingest: IngestConfig = field(default_factory=IngestConfig)
@@ -158,6 +174,7 @@ def config_from_dict(raw: dict[str, Any]) -> Config:
         ros2=ros2_config,
         fleet=fleet.fleet_limits(fleet_section),
         robot_namespace_depth=fleet.robot_namespace_depth(fleet_section),
+        inventory=inventory.inventory_config(section(raw, "inventory", inventory.KEYS)),
         metrics=metrics.metrics_config(section(raw, "metrics", metrics.KEYS)),
         ingest=ingest.ingest_config(section(raw, "ingest", ingest.KEYS)),
         events=events.events_config(section(raw, "events", events.KEYS)),

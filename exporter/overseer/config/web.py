@@ -35,7 +35,13 @@ OPTIONS: tuple[Option, ...] = (
         "web.enable_maintenance_api",
         "off",
         "let the users of maintenance.writers open and end maintenance windows (POST, DELETE "
-        "/api/v1/maintenance); reading is always on",
+        "/api/v1/maintenance) and retire robots (POST /api/v1/retirements); reading is always on",
+        kind="switch",
+    ),
+    option(
+        "web.enable_lifecycle",
+        "off",
+        "answer POST /-/reload (reload the inventory file), as Prometheus's flag of the same name does",
         kind="switch",
     ),
 )
@@ -50,6 +56,7 @@ class WebConfig:
     config_file: str | None = None
     external_url: str | None = None  # the URL users reach us at, for links in alerts (no trailing /)
     enable_maintenance_api: bool = False  # POST and DELETE /api/v1/maintenance, for maintenance.writers
+    enable_lifecycle: bool = False  # POST /-/reload
 
     @property
     def host_and_port(self) -> tuple[str, int]:
@@ -79,6 +86,8 @@ def web_config(raw: dict[str, Any]) -> WebConfig:
     if "enable_maintenance_api" in raw:
         enabled = boolean(raw["enable_maintenance_api"], "web.enable_maintenance_api")
         config = replace(config, enable_maintenance_api=enabled)
+    if "enable_lifecycle" in raw:
+        config = replace(config, enable_lifecycle=boolean(raw["enable_lifecycle"], "web.enable_lifecycle"))
     return config
 
 

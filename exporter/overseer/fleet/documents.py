@@ -8,27 +8,44 @@ from typing import Any
 
 from overseer.levels import Level, severity_rank, worst
 from overseer.model import Component, FleetSnapshot, RobotState
+from overseer.model.inventory import is_stand_in
 from overseer.model.state import learned_period
 
 _COUNT_NAMES = tuple((level, level.name.lower()) for level in Level)
 
 
-def robots_document(snapshot: FleetSnapshot) -> dict[str, Any]:
-    """GET /api/v1/robots: every robot's summary."""
+@dataclass(frozen=True)
+class RobotQuery:
+    """Which robots GET /api/v1/robots returns: those with every one of `labels` (name, value).
+
+    An empty value asks for robots without the label, as a Prometheus matcher `site=""` does.
+    """
+
+    labels: tuple[tuple[str, str], ...] = ()
+
+    def matches(self, robot: RobotState) -> bool:
+        """True when `robot` carries every label asked for."""
+        have = dict(robot.listing.labels) if robot.listing is not None else {}
+        return all(have.get(name, "") == value for name, value in self.labels)
+
+
+def robots_document(snapshot: FleetSnapshot, query: RobotQuery | None = None) -> dict[str, Any]:
+    """GET /api/v1/robots: every robot's summary, or those `query` selects."""
+    robots = [robot for robot in snapshot.robots if query is None or query.matches(robot)]
     return {
         "generated_at": snapshot.generated_at,
-        "robots": [
-            _robot_summary(snapshot, robot) for robot in sorted(snapshot.robots, key=lambda r: r.name)
-        ],
+        "robots": [_robot_summary(snapshot, robot) for robot in sorted(robots, key=lambda r: r.name)],
     }
 
 
 def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]:
     """GET /api/v1/robots/<robot>: one robot with every component."""
     up = snapshot.robot_up(robot)
+    listing = robot.listing
     components = []
     for key, component in sorted(robot.components.items()):
         level = snapshot.component_level(robot, key, component, up)
+        reported = not is_stand_in(component)
         components.append(
             {
                 "name": component.name,
@@ -39,9 +56,13 @@ def robot_document(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
                 "stale": level is Level.STALE,
                 "message": component.message,
                 "values": [{"key": key, "value": value} for key, value in component.values],
-                "last_update": robot.wall_time(snapshot.last_update(robot, key, component)),
+                "last_update": robot.wall_time(snapshot.last_update(robot, key, component))
+                if reported
+                else None,
                 "stale_after": snapshot.stale_after(robot, component),
                 "level_changes": component.level_changes,
+                "reported": reported,
+                "expected": not reported or (listing is not None and listing.expects(component.name)),
             }
         )
     document = _robot_summary(snapshot, robot)
@@ -60,6 +81,9 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
         "level": int(level),
         "state": level.name,
         "up": up,
+        "down_reason": None if up else down_reason(robot),
+        "labels": dict(robot.listing.labels) if robot.listing is not None else {},
+        "listed": robot.listing is not None,
         "publisher_alive": robot.publisher_alive,
         "last_message": robot.last_message_wall,
         "period": learned_period(robot),
@@ -68,6 +92,13 @@ def _robot_summary(snapshot: FleetSnapshot, robot: RobotState) -> dict[str, Any]
         "components": len(robot.components),
         "counts": counts,
     }
+
+
+def down_reason(robot: RobotState) -> str:
+    """Why a robot that is down is: never_heard, publisher_left or silent."""
+    if robot.last_message is None:
+        return "never_heard"
+    return "silent" if robot.publisher_alive else "publisher_left"
 
 
 COMPONENTS_DEFAULT_LIMIT = 100
@@ -133,7 +164,10 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
                 "message": component.message,
                 "last_update": robots[robot_name].wall_time(
                     snapshot.last_update(robots[robot_name], component.key, component)
-                ),
+                )
+                if not is_stand_in(component)
+                else None,
+                "reported": not is_stand_in(component),
             }
             for _, robot_name, _, _, component, level in chosen
         ],

@@ -49,6 +49,7 @@ class _RobotLines:
     signature: tuple[int, bool, tuple[int, ...]]
     timing: RobotTiming  # when its components turn STALE, for this revision
     robot_level: Level
+    info: str  # its ros_diagnostics_robot_info line
     levels: bytes
     changes: bytes
     values: bytes
@@ -89,7 +90,7 @@ class FleetExposition:
         render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
-        robot_level, robot_up, last_message, periods = [], [], [], []
+        robot_level, robot_up, last_message, periods, info = [], [], [], [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
@@ -103,6 +104,7 @@ class FleetExposition:
             messages.append(lines.messages)
             robot_level.append(f"ros_diagnostics_robot_level{label}{go_float(float(lines.robot_level))}\n")
             robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
+            info.append(lines.info)
             if robot.last_message is not None:
                 last_message.append(
                     f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
@@ -120,6 +122,7 @@ class FleetExposition:
                 "".join(robot_up).encode(),
                 "".join(last_message).encode(),
                 "".join(periods).encode(),
+                "".join(info).encode(),
                 b"".join(changes),
                 b"".join(values),
                 b"".join(messages),
@@ -128,6 +131,7 @@ class FleetExposition:
             dict(snapshot.dropped_statuses),
             snapshot.truncated_strings,
             dict(snapshot.source_errors),
+            dict(snapshot.forgotten_counts),
         )
 
 
@@ -141,6 +145,7 @@ class ExpositionPart:
     dropped_statuses: dict[str, int]
     truncated_strings: int
     source_errors: dict[tuple[str, str], int]
+    forgotten: dict[str, int]  # robots forgotten, by reason
 
 
 def _lines_for(
@@ -206,6 +211,7 @@ def _lines_for(
         signature,
         timing,
         worst(levels) if up else Level.STALE,
+        _info_line(robot, escape) if cached is None or not same_revision else cached.info,
         level_lines,
         changes,
         values_lines,
@@ -275,6 +281,15 @@ class _LinesBuilder:
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
+
+
+def _info_line(robot: RobotState, escape: Callable[[str], str]) -> str:
+    """The robot's ros_diagnostics_robot_info line: its name and inventory labels, by label name."""
+    labels = [("robot", robot.name)]
+    if robot.listing is not None:
+        labels.extend(robot.listing.labels)
+    text = ",".join(f'{name}="{escape(value)}"' for name, value in sorted(labels))
+    return f"ros_diagnostics_robot_info{{{text}}} 1.0\n"
 
 
 def _status_message_line(identity: str, level: Level, message: str, robot_label: str) -> bytes:

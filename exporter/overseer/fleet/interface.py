@@ -7,13 +7,22 @@ once against this interface and never know which one they read.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from prometheus_client.registry import Collector
 
-from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.documents import ComponentQuery, RobotQuery
 from overseer.fleet.exposition import ExpositionPart
-from overseer.model import FleetSnapshot
+from overseer.model import FleetSnapshot, Inventory, RememberedRobot
+
+
+@dataclass(frozen=True)
+class FleetStart:
+    """What a fleet follows before it hears anything: the inventory's robots, and those heard before."""
+
+    inventory: Inventory = field(default_factory=Inventory)
+    remembered: tuple[RememberedRobot, ...] = ()
 
 
 class FleetPartUnavailable(RuntimeError):
@@ -39,8 +48,8 @@ class Fleet(Protocol):
         """Every model's rendered series and counters, for an assembler to write out in a format."""
         ...
 
-    def robots_document(self) -> dict[str, Any]:
-        """GET /api/v1/robots."""
+    def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
+        """GET /api/v1/robots: every robot, or those `query` selects."""
         ...
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
@@ -53,4 +62,19 @@ class Fleet(Protocol):
 
     def collectors(self) -> list[Collector]:
         """The fleet's own metrics beyond the series (how its workers fare), appended to /metrics."""
+        ...
+
+    def set_inventory(self, inventory: Inventory) -> None:
+        """Follow `inventory` from now on: its robots, their labels and expected components."""
+        ...
+
+    def retire(self, robot: str) -> str:
+        """Forget a robot that is down and not listed: 'retired', or why not: 'unknown', 'listed', 'up'."""
+        ...
+
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard (in this run or before it) and when it was last heard; raises as `snapshot`.
+
+        `with_components` adds what each reported, for a clean stop.
+        """
         ...

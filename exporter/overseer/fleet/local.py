@@ -13,12 +13,20 @@ from typing import Any
 from prometheus_client.registry import Collector
 
 from overseer.config import Config
-from overseer.fleet.documents import ComponentQuery, components_document, robot_document, robots_document
+from overseer.fleet.documents import (
+    ComponentQuery,
+    RobotQuery,
+    components_document,
+    robot_document,
+    robots_document,
+)
 from overseer.fleet.exposition import ExpositionPart, FleetExposition
+from overseer.fleet.interface import FleetStart
 from overseer.fleet.message_labels import MessageLabels
-from overseer.model import FleetModel, FleetSnapshot
+from overseer.model import FleetModel, FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import EventSink
 from overseer.model.expiry import start_expiry
+from overseer.model.shard import Shard
 from overseer.model.transitions import TransitionDetector
 from overseer.sources import Source, build_sources
 
@@ -36,20 +44,30 @@ class LocalFleet:
         sources: list[Source],
         exposition: FleetExposition,
         events: EventSink | None = None,
+        start: FleetStart | None = None,
+        shard: Shard | None = None,
     ) -> None:
-        """Serve `model`, fed by `sources`, rendered by `exposition`; `events` receives its transitions."""
+        """Serve `model`, fed by `sources`, rendered by `exposition`; `events` receives its transitions.
+
+        `start` is what it follows from the start; of it, and of every inventory, only the robots `shard`
+        owns.
+        """
         self.model = model
         self.sources = sources
         self.exposition = exposition
         self._watch = None if events is None else TransitionWatch(model, events)
         self._stopping = threading.Event()
+        self._start = start or FleetStart()
+        self._shard = shard or Shard()
 
     @classmethod
-    def build(cls, config: Config, events: EventSink | None = None) -> LocalFleet:
+    def build(
+        cls, config: Config, events: EventSink | None = None, start: FleetStart | None = None
+    ) -> LocalFleet:
         """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
 
         `events`, when given, receives the model's transitions (level changes as they are applied, and
-        what time decides, checked every second).
+        what time decides, checked every second); `start` says what it follows before it hears anything.
         """
         model = FleetModel(config.fleet)
         metrics = config.metrics
@@ -57,10 +75,13 @@ class LocalFleet:
         exposition = FleetExposition(
             model, metrics.value_key_pattern, messages=messages, level_changes=metrics.level_changes
         )
-        return cls(model, build_sources(config, model), exposition, events)
+        return cls(model, build_sources(config, model), exposition, events, start, config.shard)
 
     def start(self) -> None:
-        """Watch transitions, start the transports, and forget silent robots from now on."""
+        """Follow the robots listed and remembered, watch transitions, start the transports, expire."""
+        owns = self._shard.owns
+        self.model.set_inventory(self._start.inventory, owns)
+        self.model.remember(robot for robot in self._start.remembered if owns(robot.name))
         if self._watch is not None:
             self._watch.start()  # before the transports, so that it sees their first messages
         for source in self.sources:
@@ -83,9 +104,9 @@ class LocalFleet:
         """The model's rendered series and counters."""
         return [self.exposition.render_part()]
 
-    def robots_document(self) -> dict[str, Any]:
-        """Every robot's summary."""
-        return robots_document(self.model.snapshot())
+    def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
+        """Every robot's summary, or those `query` selects."""
+        return robots_document(self.model.snapshot(), query)
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """One robot with every component, or None."""
@@ -100,6 +121,18 @@ class LocalFleet:
     def collectors(self) -> list[Collector]:
         """None: one model in this process has no metrics of its own beyond its series."""
         return []
+
+    def set_inventory(self, inventory: Inventory) -> None:
+        """Follow the robots of `inventory` this fleet's shard owns."""
+        self.model.set_inventory(inventory, self._shard.owns)
+
+    def retire(self, robot: str) -> str:
+        """Forget a robot that is down and not listed (see `FleetModel.retire`)."""
+        return self.model.retire(robot)
+
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard and when it was last heard (and what it reported, `with_components`)."""
+        return self.model.heard(with_components)
 
 
 class TransitionWatch:

@@ -57,6 +57,13 @@ PERIOD = MetricFamily(
     ("robot",),
     unit="seconds",
 )
+ROBOT_INFO = MetricFamily(
+    "ros_diagnostics_robot_info",
+    "gauge",
+    "Every robot followed, with the labels the inventory gives it (site, model, team, ...); always 1. "
+    "Join it where a label is needed: * on (robot) group_left (site) ros_diagnostics_robot_info.",
+    ("robot",),  # and the robot's inventory labels, which differ from robot to robot
+)
 LEVEL_CHANGES = MetricFamily(
     "ros_diagnostics_level_changes",
     "counter",
@@ -92,6 +99,13 @@ STATUSES_DROPPED = MetricFamily(
 STRINGS_TRUNCATED = MetricFamily(
     "overseer_strings_truncated", "counter", "Names, messages and key-values cut to max_string_length."
 )
+ROBOTS_FORGOTTEN = MetricFamily(
+    "overseer_robots_forgotten",
+    "counter",
+    "Robots forgotten, by reason: expired (silent for expire_after, not in the inventory), retired (by "
+    "overseer robots retire) or unlisted (removed from the inventory, never heard).",
+    ("reason",),
+)
 SOURCE_ERRORS = MetricFamily(
     "overseer_source_errors",
     "counter",
@@ -112,7 +126,26 @@ WEB_INFO = MetricFamily(
 )
 
 # Per robot and per component: a model's rendered part holds their lines, in this order.
-FLEET_FAMILIES = (LEVEL, ROBOT_LEVEL, ROBOT_UP, LAST_MESSAGE, PERIOD, LEVEL_CHANGES, VALUE, STATUS_MESSAGE)
+FLEET_FAMILIES = (
+    LEVEL,
+    ROBOT_LEVEL,
+    ROBOT_UP,
+    LAST_MESSAGE,
+    PERIOD,
+    ROBOT_INFO,
+    LEVEL_CHANGES,
+    VALUE,
+    STATUS_MESSAGE,
+)
 # The exporter's own, after the fleet's.
-EXPORTER_FAMILIES = (MESSAGES, STATUSES_DROPPED, STRINGS_TRUNCATED, SOURCE_ERRORS, BUILD_INFO, WEB_INFO)
+EXPORTER_FAMILIES = (
+    MESSAGES,
+    STATUSES_DROPPED,
+    STRINGS_TRUNCATED,
+    SOURCE_ERRORS,
+    ROBOTS_FORGOTTEN,
+    BUILD_INFO,
+    WEB_INFO,
+)
+FORGET_REASONS = ("expired", "retired", "unlisted")
 CONTRACT_FAMILIES = FLEET_FAMILIES + EXPORTER_FAMILIES

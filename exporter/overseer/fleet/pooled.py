@@ -7,14 +7,16 @@ Each worker follows its own robots (`workers/`); every answer here is joined fro
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
 from prometheus_client.registry import Collector
 
 from overseer.config import Config
-from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.documents import ComponentQuery, RobotQuery
 from overseer.fleet.exposition import ExpositionPart
+from overseer.fleet.interface import FleetStart
 from overseer.fleet.workers.merge import (
     CounterCarry,
     counters_part,
@@ -25,7 +27,7 @@ from overseer.fleet.workers.merge import (
 )
 from overseer.fleet.workers.metrics import WorkerPoolCollector
 from overseer.fleet.workers.pool import WorkerPool, WorkersUnavailable
-from overseer.model import FleetSnapshot
+from overseer.model import FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import EventSink
 
 SNAPSHOT_REUSE_SECONDS = 1.0
@@ -37,9 +39,14 @@ class PooledFleet:
     `events`, when given, receives every worker's transitions.
     """
 
-    def __init__(self, config: Config, events: EventSink | None = None) -> None:
-        """Prepare the pool; no worker runs until `start`."""
-        self.pool = WorkerPool(config, events)
+    def __init__(
+        self,
+        config: Config,
+        events: EventSink | None = None,
+        start: Callable[[], FleetStart] | None = None,
+    ) -> None:
+        """Prepare the pool; no worker runs until `start`. `start` says what a worker follows at first."""
+        self.pool = WorkerPool(config, events, start)
         self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
         self._counters = CounterCarry(self.pool.count)
         self._last_snapshot: FleetSnapshot | None = None
@@ -81,9 +88,9 @@ class PooledFleet:
         totals = self._counters.totals((a.worker, a.generation, part_counters(a.value)) for a in answers)
         return [*(_without_counters(answer.value) for answer in answers), counters_part(totals)]
 
-    def robots_document(self) -> dict[str, Any]:
-        """Every worker's robots, by name."""
-        return merge_robots_documents([a.value for a in self.pool.ask_all("robots")], time.time())
+    def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
+        """Every worker's robots (those `query` selects), by name."""
+        return merge_robots_documents([a.value for a in self.pool.ask_all("robots", query)], time.time())
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """The robot from the one worker that follows it, or None."""
@@ -105,6 +112,28 @@ class PooledFleet:
         """How the workers fare: how many, which are up, how often each was restarted."""
         return [WorkerPoolCollector(self.pool)]
 
+    def set_inventory(self, inventory: Inventory) -> None:
+        """Every worker follows its robots of `inventory` (a worker restarting gets it as it starts)."""
+        self.pool.ask_all("inventory", inventory)
+
+    def retire(self, robot: str) -> str:
+        """The worker that follows `robot` forgets it, if it is down and not listed."""
+        for index, owner in enumerate(self._owners):
+            if owner.owns(robot):
+                answer = self.pool.ask(index, "retire", robot)
+                if answer is None:
+                    raise WorkersUnavailable(
+                        f"ingest worker {index}, which follows {robot!r}, did not answer"
+                    )
+                return str(answer[0])
+        return "unknown"
+
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every worker's robots heard; `WorkersUnavailable` rather than a list missing a worker's."""
+        return [robot for answer in self.pool.ask_every("heard", with_components) for robot in answer.value]
+
 
 def _without_counters(part: ExpositionPart) -> ExpositionPart:
-    return replace(part, message_counts={}, dropped_statuses={}, truncated_strings=0, source_errors={})
+    return replace(
+        part, message_counts={}, dropped_statuses={}, truncated_strings=0, source_errors={}, forgotten={}
+    )

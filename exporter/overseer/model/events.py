@@ -15,6 +15,8 @@ EventKind = Literal[
     "appeared",
     "missing",
     "expired",
+    "retired",
+    "unlisted",
     "maintenance_start",
     "maintenance_end",
 ]

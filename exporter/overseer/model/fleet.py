@@ -23,6 +23,14 @@ from typing import NamedTuple
 
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model.inventory import (
+    EXPECTED_FEED,
+    Inventory,
+    expected_components,
+    is_stand_in,
+    listed_state,
+    restored_components,
+)
 from overseer.model.snapshot import FleetSnapshot
 from overseer.model.state import (
     PERIOD_SAMPLES,
@@ -30,8 +38,12 @@ from overseer.model.state import (
     ComponentKey,
     Feed,
     FleetLimits,
+    ForgetReason,
+    Forgetting,
+    RememberedRobot,
     RobotState,
     feed_stale_after,
+    robot_timeout,
     up_since,
 )
 
@@ -84,6 +96,8 @@ class FleetModel:
         # whoever saw the apply's result in a snapshot can wait for its events to be sent first.
         self._telling = threading.Lock()
         self._clashed: dict[str, set[str]] = {}  # robot → names it reports kept apart by hardware_id
+        self._forgotten: dict[str, Forgetting] = {}  # the robots forgotten last, oldest first, and why
+        self._forgotten_counts: Counter[str] = Counter()
 
     def set_level_listener(self, listener: LevelListener | None) -> None:
         """Have `listener` told of every reported level change and every new component, as applied."""
@@ -166,6 +180,7 @@ class FleetModel:
                 state.left_at,
                 wall - now,
                 up_since(self.limits, state, now),
+                state.listing,
             )
             self._message_counts[(transport, "received")] += 1
         return True
@@ -211,11 +226,14 @@ class FleetModel:
                 learned = _learned(old_feed, now, old_feed.latest == latest)
                 new_feed = learned._replace(latest=latest, revision=old_feed.revision + 1)
                 feeds[position] = new_feed
+            components = merge.components
+            if merge.added and state.listing is not None:
+                components = expected_components(state.listing, components, now)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
                 now,
-                MappingProxyType(merge.components),
+                MappingProxyType(components),
                 state.discovered_at,
                 state.revision + 1,
                 merge.other_feeds(feeds),
@@ -223,6 +241,7 @@ class FleetModel:
                 state.left_at,
                 wall - now,
                 up_since(limits, state, now),
+                state.listing,
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
@@ -313,6 +332,7 @@ class FleetModel:
                 state.left_at,
                 wall - now,
                 up_since(self.limits, state, now),
+                state.listing,
             )
             self._message_counts[(transport, "received")] += 1
             if changes and listener is not None:
@@ -338,25 +358,137 @@ class FleetModel:
             gone = {feed.name for feed in state.feeds if feed.topic == topic}
             if gone:
                 kept = {k: c for k, c in state.components.items() if c.feed not in gone}
-                self._robots[robot] = _replace_components(state, kept)
+                self._robots[robot] = _replace_components(state, kept, self._clock())
 
     def expire(self) -> list[str]:
-        """Forget robots and components silent for `expire_after`; returns the robots forgotten."""
-        now = self._clock()
+        """Forget robots and components silent for `expire_after`; returns the robots forgotten.
+
+        A listed robot is never forgotten, nor a component its listing expects (nor a stand-in for one).
+        """
+        now, wall = self._clock(), self._wall_clock()
         horizon = now - self.limits.expire_after
         forgotten = []
         last_update = FleetSnapshot.last_update
         with self._lock:
             for name, state in list(self._robots.items()):
-                if state.last_seen < horizon:
+                listing = state.listing
+                if state.last_seen < horizon and listing is None:
                     del self._robots[name]
-                    self._clashed.pop(name, None)
+                    self._forget(name, "expired", wall)
                     forgotten.append(name)
                     continue
                 if any(last_update(state, k, c) < horizon for k, c in state.components.items()):
-                    kept = {k: c for k, c in state.components.items() if last_update(state, k, c) >= horizon}
-                    self._robots[name] = _replace_components(state, kept)
+                    kept = {
+                        key: component
+                        for key, component in state.components.items()
+                        if last_update(state, key, component) >= horizon
+                        or (listing is not None and (is_stand_in(component) or listing.expects(key[0])))
+                    }
+                    if len(kept) < len(state.components):
+                        self._robots[name] = _replace_components(state, kept, now)
         return forgotten
+
+    def set_inventory(self, inventory: Inventory, owns: Callable[[str], bool] | None = None) -> None:
+        """Follow the inventory's robots (those `owns` accepts) from now on, heard or not.
+
+        Each is labelled and shows its expected components; a robot no longer listed is followed as a
+        discovered one (forgotten at once if it was never heard, after `expire_after` otherwise).
+        """
+        now, wall = self._clock(), self._wall_clock()
+        listed = {name: entry for name, entry in inventory.robots.items() if owns is None or owns(name)}
+        with self._lock:
+            for name, state in list(self._robots.items()):
+                if state.listing is None or name in listed:
+                    continue
+                if state.last_message is None:
+                    del self._robots[name]
+                    self._forget(name, "unlisted", wall)
+                else:
+                    self._robots[name] = listed_state(state, None, now)
+            for name, entry in listed.items():
+                known = self._robots.get(name)
+                if known is None:
+                    known = RobotState(name, "", None, MappingProxyType({}), now, wall_offset=wall - now)
+                if known.listing != entry:
+                    self._robots[name] = listed_state(known, entry, now)
+
+    def remember(self, robots: Iterable[RememberedRobot]) -> None:
+        """Robots heard before this start: each silent since it was last heard, until it speaks again."""
+        now, wall = self._clock(), self._wall_clock()
+        with self._lock:
+            for name, transport, heard_at, down, remembered in robots:
+                state = self._robots.get(name)
+                if state is not None and state.last_message is not None:
+                    continue  # heard already in this run
+                if state is None and len(self._robots) >= self.limits.max_robots:
+                    self._dropped_statuses["robot_limit"] += 1
+                    continue
+                last = now - max(0.0, wall - heard_at)
+                listing = None if state is None else state.listing
+                components = expected_components(listing, restored_components(remembered, last), now)
+                self._robots[name] = RobotState(
+                    name,
+                    transport,
+                    last,
+                    MappingProxyType(components),
+                    last,
+                    left_at=last if down else None,  # down until a message arrives after it
+                    wall_offset=wall - now,
+                    up_since=last,
+                    listing=listing,
+                )
+
+    def heard(self, with_components: bool = False) -> list[RememberedRobot]:
+        """Every robot heard, in this run or before it: when it was last heard (unix time), if down now.
+
+        `with_components` adds what each reported (for a clean stop: a fleet of thousands is a lot).
+        """
+        now = self._clock()
+        limits = self.limits
+        with self._lock:
+            robots = [state for state in self._robots.values() if state.last_message is not None]
+        return [
+            RememberedRobot(
+                state.name,
+                state.transport,
+                state.last_message + state.wall_offset,
+                not state.publisher_alive or now - state.last_message > robot_timeout(limits, state),
+                tuple(
+                    (component.name, component.hardware_id, int(component.level), component.message)
+                    for component in state.components.values()
+                    if component.feed != EXPECTED_FEED
+                )
+                if with_components
+                else (),
+            )
+            for state in robots
+            if state.last_message is not None
+        ]
+
+    def retire(self, name: str) -> str:
+        """Forget a robot that is down and not listed: 'retired', or why not: 'unknown', 'listed', 'up'."""
+        now, wall = self._clock(), self._wall_clock()
+        with self._lock:
+            state = self._robots.get(name)
+            if state is None:
+                return "unknown"
+            if state.listing is not None:
+                return "listed"
+            last = state.last_message
+            if last is not None and state.publisher_alive and now - last <= robot_timeout(self.limits, state):
+                return "up"
+            del self._robots[name]
+            self._forget(name, "retired", wall)
+        return "retired"
+
+    def _forget(self, name: str, reason: ForgetReason, wall: float) -> None:
+        """Count and note a robot just dropped from `_robots` (under the lock), for the event detector."""
+        self._clashed.pop(name, None)
+        self._forgotten_counts[reason] += 1
+        forgotten = self._forgotten
+        forgotten[name] = Forgetting(reason, wall)
+        if len(forgotten) > _FORGETTINGS_KEPT:
+            del forgotten[next(iter(forgotten))]  # the oldest: the detector read it long ago
 
     def snapshot(self) -> FleetSnapshot:
         """An immutable copy of the fleet, taken now."""
@@ -366,8 +498,19 @@ class FleetModel:
             dropped = dict(self._dropped_statuses)
             truncated = self._truncated_strings
             errors = dict(self._source_errors)
+            forgotten = dict(self._forgotten) if self._forgotten else _NONE_FORGOTTEN
+            forgotten_counts = dict(self._forgotten_counts)
         return FleetSnapshot(
-            self._clock(), self.limits, robots, counts, dropped, truncated, errors, self._wall_clock()
+            self._clock(),
+            self.limits,
+            robots,
+            counts,
+            dropped,
+            truncated,
+            errors,
+            self._wall_clock(),
+            forgotten,
+            forgotten_counts,
         )
 
 
@@ -391,6 +534,7 @@ class _Merge:
         self._clashed = clashed  # the robot's names kept apart by hardware_id (the model's own set)
         self._missing = set(state.missing)
         self._in_message: set[ComponentKey] = set()
+        self.added = False  # a component the robot had not reported: its expectations are judged again
         self._taken_over: dict[str, set[ComponentKey]] = {}  # other feeds → the components taken from them
 
     def statuses(
@@ -411,7 +555,10 @@ class _Merge:
             (name, hardware_id), level, message, values, intact = entry
             key = (name, "") if name not in self._clashed else self._kept_apart(name, hardware_id, first_ids)
             previous = components.get(key)
+            if previous is not None and previous.feed == EXPECTED_FEED:
+                previous = None  # reported at last: a new component, in the stand-in's place
             if previous is None:
+                self.added = True
                 if len(components) >= limits.max_components_per_robot:
                     dropped["component_limit"] += 1
                     latest.append(None)
@@ -482,6 +629,8 @@ class _Merge:
 
 
 _NONE_MISSING: frozenset[ComponentKey] = frozenset()
+_NONE_FORGOTTEN: dict[str, Forgetting] = {}
+_FORGETTINGS_KEPT = 10_000  # enough for every robot forgotten between two checks of the detector
 
 # A status ready to merge: its name and hardware_id, level, message, values, and whether it arrived whole.
 _Prepared = tuple[tuple[str, str], Level, str, tuple[tuple[str, str], ...], bool]
@@ -627,8 +776,14 @@ def _merged(
     return _component(previous.key, level, message, hardware_id, values, now, changes, feed)
 
 
-def _replace_components(state: RobotState, components: dict[ComponentKey, Component]) -> RobotState:
-    """`state` with only `components`: feeds forget the others, and feeds that carry none go."""
+def _replace_components(
+    state: RobotState, components: dict[ComponentKey, Component], now: float
+) -> RobotState:
+    """`state` with only `components`: feeds forget the others, and feeds that carry none go.
+
+    Expectations the components no longer meet get their stand-ins.
+    """
+    components = expected_components(state.listing, components, now)
     carried = {component.feed for component in components.values()}
     feeds = tuple(
         feed._replace(

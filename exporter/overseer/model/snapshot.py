@@ -20,10 +20,12 @@ from functools import lru_cache
 from typing import NamedTuple
 
 from overseer.levels import Level, worst
+from overseer.model.inventory import EXPECTED_FEED
 from overseer.model.state import (
     Component,
     ComponentKey,
     FleetLimits,
+    Forgetting,
     RobotState,
     StaleOverride,
     feed_stale_after,
@@ -58,6 +60,8 @@ class FleetSnapshot:
     truncated_strings: int = 0
     source_errors: Mapping[tuple[str, str], int] = field(default_factory=dict)
     generated_at: float = 0.0  # the wall clock when it was taken (unix time)
+    forgotten: Mapping[str, Forgetting] = field(default_factory=dict)  # the last robots forgotten, and why
+    forgotten_counts: Mapping[str, int] = field(default_factory=dict)  # robots forgotten, by reason
 
     def robot_up(self, robot: RobotState) -> bool:
         """True while the robot's messages arrive within its timeout, and since its publisher's departure."""
@@ -152,6 +156,8 @@ class FleetSnapshot:
         own: list[float] = []
         missing = robot.missing
         for key, component in robot.components.items():
+            if component.feed == EXPECTED_FEED:
+                continue  # a stand-in is STALE whatever the time
             if key in missing or component.feed not in index:
                 own.append(component.last_update + self.stale_after(robot, component))
             else:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 from overseer.levels import Level
 
@@ -20,6 +20,7 @@ from overseer.levels import Level
 # apart, each under its hardware_id.
 ComponentKey = tuple[str, str]
 
+UNREPORTED = "expected, not reported"  # what the stand-in of an expected component no one reported says
 STALE_PERIODS = 3.0  # a component is STALE after this many of its producer's periods without an update
 PERIOD_SAMPLES = 5  # intervals a feed's period is the median of
 
@@ -38,7 +39,7 @@ class FleetLimits:
 
     stale_after: float = 5.0
     robot_timeout: float = 10.0
-    expire_after: float = 3600.0
+    expire_after: float = 7 * 86400.0  # a week: a robot dead on Friday evening is still down on Monday
     max_robots: int = 10_000
     max_components_per_robot: int = 1_000
     max_values_per_component: int = 64
@@ -75,6 +76,45 @@ class Component(NamedTuple):
         return self.key[0]
 
 
+@dataclass(frozen=True, slots=True)
+class Expectation:
+    """Components a robot's inventory entry says it must report: one by name, or `at_least` matching."""
+
+    shown_as: str  # the component that stands for it while unmet: the name, 'prefix*' or the regex
+    exact: str = ""
+    prefix: str = ""
+    pattern: re.Pattern[str] | None = None
+    at_least: int = 1
+
+    def matches(self, name: str) -> bool:
+        """True when a component called `name` counts towards this expectation."""
+        if self.pattern is not None:
+            return self.pattern.fullmatch(name) is not None
+        if self.prefix:
+            return name.startswith(self.prefix)
+        return name == self.exact
+
+    def unmet_message(self, reported: int) -> str:
+        """What the component standing for this expectation says, with `reported` matching components."""
+        if self.exact:
+            return UNREPORTED
+        what = f"matching {self.prefix}*" if self.prefix else f"matching {self.shown_as}"
+        counts = f"{reported or 'none'} reported, {self.at_least - reported} missing"
+        return f"expected at least {self.at_least} components {what}: {counts}"
+
+
+@dataclass(frozen=True, slots=True)
+class ListedRobot:
+    """A robot of the inventory: its labels (sorted by name) and the components it must report."""
+
+    labels: tuple[tuple[str, str], ...] = ()
+    expected: tuple[Expectation, ...] = ()
+
+    def expects(self, name: str) -> bool:
+        """True when a component called `name` is one this robot must report."""
+        return any(expectation.matches(name) for expectation in self.expected)
+
+
 class Feed(NamedTuple):
     """One stream a robot is heard on: a topic, from one publisher where the transport tells them apart.
 
@@ -95,6 +135,34 @@ class Feed(NamedTuple):
     intervals: tuple[float, ...] = ()
 
 
+ForgetReason = Literal["expired", "retired", "unlisted"]
+
+
+class Forgetting(NamedTuple):
+    """Why a robot was forgotten, and when (unix time)."""
+
+    reason: ForgetReason
+    at: float
+
+
+# A component as remembered: its name, hardware_id, reported level and message (not its key-values).
+RememberedComponent = tuple[str, str, int, str]
+
+
+class RememberedRobot(NamedTuple):
+    """A robot heard before this start: its name, its transport, when it was last heard (unix time).
+
+    `down` when it was down then (silent, or its publisher gone): it is down until it speaks again.
+    `components` are its components then, as a clean stop keeps them (none after a crash).
+    """
+
+    name: str
+    transport: str
+    heard_at: float
+    down: bool = False
+    components: tuple[RememberedComponent, ...] = ()
+
+
 @dataclass(frozen=True, slots=True)
 class RobotState:
     """One robot as last seen; replaced whole, never mutated.
@@ -103,7 +171,8 @@ class RobotState:
     applies); it is empty for almost every robot, so it is shared. `left_at` is when a transport that
     tracks publishers (DDS discovery, Zenoh liveliness, the ROS graph) saw the robot's last diagnostics
     publisher go: the robot is down from then until a message arrives after it. `revision` changes with
-    anything a judgement or a rendering of the robot depends on but the feeds' times.
+    anything a judgement or a rendering of the robot depends on but the feeds' times. `listing` is its
+    entry in the inventory (labels, expected components), None for a robot known only by discovery.
     """
 
     name: str
@@ -117,6 +186,7 @@ class RobotState:
     left_at: float | None = None
     wall_offset: float = 0.0  # wall clock minus monotonic clock, at the last message (or discovery)
     up_since: float = 0.0  # the first message since it was last down (silent, or its publisher gone)
+    listing: ListedRobot | None = None
 
     @property
     def last_seen(self) -> float:

@@ -22,8 +22,16 @@ from dataclasses import dataclass
 from overseer.levels import Level, worst
 from overseer.model.events import Event, EventSink
 from overseer.model.fleet import LevelChange
+from overseer.model.inventory import EXPECTED_FEED
 from overseer.model.snapshot import FleetSnapshot, RobotTiming
-from overseer.model.state import Component, ComponentKey, FleetLimits, RobotState, robot_timeout
+from overseer.model.state import (
+    Component,
+    ComponentKey,
+    FleetLimits,
+    Forgetting,
+    RobotState,
+    robot_timeout,
+)
 
 
 @dataclass(slots=True)
@@ -77,11 +85,14 @@ class TransitionDetector:
         events: list[Event] = []
         seen = self._seen
         robot_up = snapshot.robot_up
+        known = 0  # robots of the snapshot seen before: fewer than `seen` holds means some are gone
         for robot in snapshot.robots:
             before = seen.get(robot.name)
             up = robot_up(robot)
             if before is None:
-                before = seen[robot.name] = _Seen(False, False, -1.0, 0.0, -1, None, {})
+                before = seen[robot.name] = _first_seen(robot, up)
+            else:
+                known += 1
             if before.revision != robot.revision or before.timing is None:
                 before.timing = snapshot.timing(robot)
                 before.revision = robot.revision
@@ -93,21 +104,31 @@ class TransitionDetector:
             ):
                 continue  # the common case: a robot up (or down) as before, every component fresh
             self._robot_transitions(snapshot, robot, before, up, events)
-        if len(seen) > len(snapshot.robots):
+        if known < len(seen) - (len(snapshot.robots) - known):
             present = {robot.name for robot in snapshot.robots}
             for name in [name for name in seen if name not in present]:
-                if not seen.pop(name).heard:
-                    continue  # discovered but never heard from: it never had an event either
-                events.append(
-                    Event(
-                        snapshot.generated_at,
-                        name,
-                        "expired",
-                        message=f"forgotten after {self._limits.expire_after:g} s of silence",
-                    )
-                )
+                event = self._forgotten(snapshot, name, seen.pop(name).heard)
+                if event is not None:
+                    events.append(event)
         if events:
             self._sink(events)
+
+    def _forgotten(self, snapshot: FleetSnapshot, name: str, heard: bool) -> Event | None:
+        """The event of a robot the model forgot, or None.
+
+        A retirement is recorded where it is asked for (with its author); a robot discovered but never
+        heard, and never listed, had no event before and gets none now.
+        """
+        forgetting = snapshot.forgotten.get(name) or Forgetting("expired", snapshot.generated_at)
+        reason, at = forgetting
+        if reason == "retired" or (reason == "expired" and not heard):
+            return None
+        message = (
+            "removed from the inventory"
+            if reason == "unlisted"
+            else f"forgotten after {self._limits.expire_after:g} s of silence"
+        )
+        return Event(at, name, reason, message=message)
 
     def _robot_transitions(
         self, snapshot: FleetSnapshot, robot: RobotState, before: _Seen, up: bool, events: list[Event]
@@ -202,8 +223,8 @@ class TransitionDetector:
             return
         last_message = robot.last_message or 0.0
         for key, component in components.items():
-            if key in stale or snapshot.fresh(robot, key, component):
-                continue
+            if key in stale or component.feed == EXPECTED_FEED or snapshot.fresh(robot, key, component):
+                continue  # a stand-in for an unmet expectation is STALE from the start: nothing happens
             went_stale_at = snapshot.went_stale_at(robot, key, component)
             if last_message <= went_stale_at:
                 continue  # the whole robot fell silent: that is its robot_down, not each component's
@@ -220,6 +241,17 @@ class TransitionDetector:
                     message=f"not updated for {snapshot.stale_after(robot, component):g} s",
                 )
             )
+
+
+def _first_seen(robot: RobotState, up: bool) -> _Seen:
+    """What the detector knows of a robot it sees for the first time.
+
+    A robot remembered from before this start (heard then, on no feed yet now) is taken as it was: no
+    event says it came up, and its next message continues its run or begins a new one as it would have.
+    """
+    if robot.last_message is not None and not robot.feeds:
+        return _Seen(True, up, robot.up_since, robot.last_message, -1, None, {})
+    return _Seen(False, False, -1.0, 0.0, -1, None, {})
 
 
 def _reported_worst(components: Mapping[ComponentKey, Component]) -> Level:

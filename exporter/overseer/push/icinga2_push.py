@@ -23,9 +23,10 @@ from overseer.maintenance.schedule import MaintenanceSchedule
 from overseer.model import FleetSnapshot
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
 from overseer.push.icinga2_downtimes import Icinga2Downtimes
+from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
-from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results, robot_signature
+from overseer.push.icinga2_results import CheckResult, awaiting, robot_groups, robot_results, robot_signature
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
@@ -78,6 +79,7 @@ class Icinga2Push:
         self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
         self._orphans: dict[str, float] = {}  # our hosts found at start, not yet seen: → deletion time
         self._to_delete: set[str] = set()
+        self._labels = HostLabels(self._client)
         self._retry = Retry("Icinga 2 push", log)
 
     def start(self) -> None:
@@ -121,6 +123,8 @@ class Icinga2Push:
         active = [] if schedule is None else schedule.active(schedule.clock())
         for robot in snapshot.robots:
             present.add(robot.name)
+            if awaiting(snapshot, robot):
+                continue  # what it reports is unknown until it speaks again: Icinga keeps its last results
             state = None if schedule is None else schedule.state(robot.name, active)
             maintenance = (
                 None if state is None else Maintenance(state.window, state.until, state.author, state.comment)
@@ -130,6 +134,7 @@ class Icinga2Push:
             if not changed and now < self._due.get(robot.name, 0.0):
                 continue
             host = self._robot_hosts.setdefault(robot.name, host_name(robot.name))
+            self._labels.want(host, robot.listing.labels if robot.listing is not None else ())
             self._orphans.pop(host, None)
             self._to_delete.discard(host)
             target = self._urgent if changed else self._pending
@@ -154,6 +159,7 @@ class Icinga2Push:
             self._signatures.pop(gone, None)
             self._due.pop(gone, None)
             self._groups.pop(gone, None)
+            self._labels.forget(host)
             for queue in (self._urgent, self._pending):
                 for key in [key for key in queue if key[0] == host]:
                     del queue[key]
@@ -167,8 +173,10 @@ class Icinga2Push:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
             if self._downtimes is not None and self._downtimes.due(self._created):
-                # Before the results: a robot put in maintenance is in downtime when its DOWN arrives.
-                self._downtimes.sync(self._robot_hosts, self._created)
+                # Before the results (and, after a restart, right after finding our hosts): a host in a
+                # window is in downtime when its robot's DOWN arrives, or its TTL runs out.
+                self._downtimes.sync(self._created)
+            self._labels.sync(self._created)
             attempted = 0
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):
@@ -203,6 +211,9 @@ class Icinga2Push:
         created: dict[str, set[str]] = {
             item["name"]: set() for item in hosts["results"] if _exporter_of(item) == mark
         }
+        for item in hosts["results"]:
+            if item["name"] in created:
+                self._labels.found(item["name"], item.get("attrs", {}).get("vars") or {})
         services = self._client.expect(
             "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars"]}
         )
@@ -235,12 +246,13 @@ class Icinga2Push:
         assert self._created is not None
         if result.host in self._foreign:
             return False
-        if result.host not in self._created and not self._create(
-            "hosts", result.host, "", self._host_attrs(result.host)
-        ):
+        made = result.host not in self._created
+        if made and not self._create("hosts", result.host, "", self._host_attrs(result.host)):
             return False
         if result.service and result.service not in self._created[result.host]:
-            self._create("services", result.host, result.service, self._service_attrs())
+            made = self._create("services", result.host, result.service, self._service_attrs()) or made
+        if made and self._downtimes is not None:  # in its window's downtime before its first result
+            self._downtimes.cover(result.host, self._created[result.host])
         body: dict[str, Any] = {
             "type": "Service" if result.service else "Host",
             "exit_status": result.exit_status,
@@ -315,7 +327,9 @@ class Icinga2Push:
         return {"overseer_managed": True, "overseer_exporter": self._config.exporter_id, "dummy_state": 3}
 
     def _host_attrs(self, host: str) -> dict[str, Any]:
-        return self._passive_attrs({"ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT})
+        return self._passive_attrs(
+            {**self._labels.variables(host), "ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT}
+        )
 
     def _service_attrs(self) -> dict[str, Any]:
         return self._passive_attrs({"dummy_text": SILENT_TEXT})

@@ -54,6 +54,15 @@ def robot_signature(snapshot: FleetSnapshot, robot: RobotState) -> tuple[object,
     return (up, tuple(robot.components), tuple(snapshot.component_levels(robot, up)))
 
 
+def awaiting(snapshot: FleetSnapshot, robot: RobotState) -> bool:
+    """True for a robot heard before this start, up then, not heard since: nothing new to push yet.
+
+    Until it speaks again (or its timeout passes and it is down) Icinga's last results stand; pushing a
+    robot whose components a crash left unknown would turn its services UNKNOWN for a few seconds.
+    """
+    return robot.last_message is not None and not robot.feeds and snapshot.robot_up(robot)
+
+
 def robot_groups(robot: RobotState) -> list[str]:
     """The groups of the robot's components, sorted."""
     return sorted({group for name, _ in robot.components if (group := group_of(name)) is not None})
@@ -113,6 +122,7 @@ def judged_robot(
         components,
         robot.publisher_alive,
         maintenance,
+        robot.listing is not None,
     )
 
 

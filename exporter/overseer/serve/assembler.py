@@ -53,10 +53,12 @@ class ExpositionAssembler:
         message_totals: Counter[tuple[str, str]] = Counter()
         dropped: Counter[str] = Counter()
         errors: Counter[tuple[str, str]] = Counter()
+        forgotten: Counter[str] = Counter()
         for part in parts:
             message_totals.update(part.message_counts)
             dropped.update(part.dropped_statuses)
             errors.update(part.source_errors)
+            forgotten.update(part.forgotten)
         truncated = sum(part.truncated_strings for part in parts)
         lines = [fmt.header(contract.MESSAGES)]
         for (transport, result), count in message_counts(message_totals, self._transports):
@@ -76,6 +78,10 @@ class ExpositionAssembler:
                 f'overseer_source_errors_total{{reason="{escape_label_value(reason)}",'
                 f'transport="{escape_label_value(transport)}"}} {go_float(float(count))}\n'
             )
+        lines.append(fmt.header(contract.ROBOTS_FORGOTTEN))
+        for reason in contract.FORGET_REASONS:
+            forgotten_count = go_float(float(forgotten[reason]))
+            lines.append(f'overseer_robots_forgotten_total{{reason="{reason}"}} {forgotten_count}\n')
         lines.append(fmt.header(contract.BUILD_INFO))
         lines.append(
             f'overseer_build_info{{codec="{compiled.implementation()}",'

@@ -27,7 +27,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
 from overseer.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
-from overseer.serve.api_query import ComponentQueryError, parse_component_query
+from overseer.serve.api_query import ApiQueryError, parse_component_query, parse_robot_query
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from overseer.serve.status_page import FAVICON, PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
@@ -241,6 +241,9 @@ class _Handler(BaseHTTPRequestHandler):
     def do_DELETE(self) -> None:
         self._serve(head_only=False)
 
+    def do_PUT(self) -> None:
+        self._serve(head_only=False)
+
     def _serve(self, head_only: bool) -> None:
         if not self.server.slots.acquire(timeout=REQUEST_TIMEOUT_SECONDS):
             self._send(503, b"too many concurrent requests\n", "text/plain; charset=utf-8", head_only)
@@ -270,7 +273,7 @@ class _Handler(BaseHTTPRequestHandler):
         elif path == "/-/healthy" or path == "/-/ready":
             self._send(200, b"OK\n", "text/plain; charset=utf-8", head_only)
         elif path == ROBOTS_PATH or path == ROBOTS_PATH + "/":
-            self._json(200, self.server.robot_documents(self.server.fleet.robots_document()), head_only)
+            self._robots(head_only)
         elif path.startswith(ROBOTS_PATH + "/"):
             self._robot(unquote(path[len(ROBOTS_PATH) + 1 :]), head_only)
         elif path == COMPONENTS_PATH:
@@ -289,6 +292,14 @@ class _Handler(BaseHTTPRequestHandler):
             )
         else:
             self._json(404, {"error": f"no such path {path!r}"}, head_only)
+
+    def _robots(self, head_only: bool) -> None:
+        try:
+            query = parse_robot_query(parse_qs(urlsplit(self.path).query))
+        except ApiQueryError as error:
+            self._json(400, {"error": str(error)}, head_only)
+            return
+        self._json(200, self.server.robot_documents(self.server.fleet.robots_document(query)), head_only)
 
     def _robot(self, name: str, head_only: bool) -> None:
         document = self.server.fleet.robot_document(name)
@@ -329,7 +340,7 @@ class _Handler(BaseHTTPRequestHandler):
     def _components(self, head_only: bool) -> None:
         try:
             query = parse_component_query(parse_qs(urlsplit(self.path).query))
-        except ComponentQueryError as error:
+        except ApiQueryError as error:
             self._json(400, {"error": str(error)}, head_only)
             return
         self._json(200, self.server.fleet.components_document(query), head_only)

@@ -1,35 +1,30 @@
 """GET, POST /api/v1/maintenance and DELETE /api/v1/maintenance/<id>, and maintenance in the robot documents.
 
-Reading is open to whoever may read the endpoint. Writing is off unless the exporter runs with
-`--web.enable-maintenance-api` (as Prometheus keeps its admin API off), and then needs a user the web
-config's basic auth proved and `maintenance.writers` lists; a browser's cross-site request is refused
-(its `Origin` or `Sec-Fetch-Site` says so), and a body must be JSON, which a plain HTML form cannot send.
+Reading is open to whoever may read the endpoint; writing follows `write_access` (off unless the exporter
+runs with `--web.enable-maintenance-api`), and a body must be JSON, which a plain HTML form cannot send.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
 from typing import Any
-from urllib.parse import urlsplit
 
 from overseer.maintenance.requests import parse_window_request
 from overseer.maintenance.schedule import MaintenanceSchedule, WindowError
 from overseer.maintenance.store import StoreUnavailable
 from overseer.routes import ApiRequest
+from overseer.serve.write_access import WriteAccess
 
 MAINTENANCE_PATH = "/api/v1/maintenance"
-_SAME_SITE = ("same-origin", "none")
 
 
 class MaintenanceApi:
     """The maintenance routes over one schedule."""
 
-    def __init__(self, schedule: MaintenanceSchedule, writers: tuple[str, ...], writable: bool) -> None:
-        """Serve `schedule`; `writers` may write when `writable` (`--web.enable-maintenance-api`)."""
+    def __init__(self, schedule: MaintenanceSchedule, access: WriteAccess) -> None:
+        """Serve `schedule`; `access` says who may write."""
         self._schedule = schedule
-        self._writers = set(writers)
-        self._writable = writable
+        self._access = access
 
     def answer(self, request: ApiRequest) -> tuple[int, dict[str, Any]]:
         """The status and JSON document answering `request`."""
@@ -69,28 +64,16 @@ class MaintenanceApi:
         now = self._schedule.clock()
         return {
             "generated_at": now,
-            "can_write": self._writable and user in self._writers,
+            "can_write": self._access.may_write(user),
             "windows": [window.document(now) for window in self._schedule.windows(now)],
         }
 
     def _write(self, request: ApiRequest, action: Any) -> tuple[int, dict[str, Any]]:
-        if not self._writable:
-            return 403, {
-                "error": "the maintenance API is read-only: start the exporter with "
-                "--web.enable-maintenance-api to write"
-            }
-        if request.user is None:
-            return 403, {
-                "error": "writing needs a user: give basic_auth_users in --web.config.file and name "
-                "the user in maintenance.writers"
-            }
-        if request.user not in self._writers:
-            return 403, {
-                "error": f"user {request.user!r} may not write maintenance windows (maintenance.writers)"
-            }
-        refused = _cross_site(request.headers)
-        if refused:
-            return 403, {"error": refused}
+        refused = self._access.refusal(
+            request, "write maintenance windows", "the maintenance API is read-only"
+        )
+        if refused is not None:
+            return refused
         try:
             status, document = action(request)
         except StoreUnavailable as error:
@@ -124,18 +107,3 @@ class MaintenanceApi:
         except WindowError as error:
             return 409, {"error": str(error)}
         return 200, {"window": window.document(self._schedule.clock())}
-
-
-def _cross_site(headers: Mapping[str, str]) -> str | None:
-    """Why a browser's request from another site is refused, or None when it is not one."""
-    fetch_site = headers.get("Sec-Fetch-Site")
-    if fetch_site is not None and fetch_site.lower() not in _SAME_SITE:
-        return f"cross-site request refused (Sec-Fetch-Site: {fetch_site[:32]})"
-    origin = headers.get("Origin")
-    if origin is not None:
-        host = headers.get("Host", "")
-        if origin == "null" or urlsplit(origin).netloc.lower() != host.lower():
-            return (
-                f"cross-site request refused (Origin {origin[:100]!r} is not this exporter, {host[:100]!r})"
-            )
-    return None

@@ -68,12 +68,26 @@ def merge_snapshots(
     counts: dict[tuple[str, str], int] = {}
     dropped: dict[str, int] = {}
     errors: dict[tuple[str, str], int] = {}
+    forgotten_counts: dict[str, int] = {}
     for part in parts:
         _add(counts, part.message_counts)
         _add(dropped, part.dropped_statuses)
         _add(errors, part.source_errors)
+        _add(forgotten_counts, part.forgotten_counts)
     truncated = sum(part.truncated_strings for part in parts)
-    return FleetSnapshot(taken_at, limits, robots, counts, dropped, truncated, errors, generated_at)
+    forgotten = {name: forgetting for part in parts for name, forgetting in part.forgotten.items()}
+    return FleetSnapshot(
+        taken_at,
+        limits,
+        robots,
+        counts,
+        dropped,
+        truncated,
+        errors,
+        generated_at,
+        forgotten,
+        forgotten_counts,
+    )
 
 
 def _add(total: dict[Any, Any], counts: Any) -> None:
@@ -132,13 +146,14 @@ def part_counters(part: ExpositionPart) -> dict[CounterKey, float]:
     }
     counts.update({("dropped", reason): value for reason, value in part.dropped_statuses.items()})
     counts.update({("errors", *key): value for key, value in part.source_errors.items()})
+    counts.update({("forgotten", reason): value for reason, value in part.forgotten.items()})
     counts[("truncated",)] = part.truncated_strings
     return counts
 
 
 def counters_part(counts: Mapping[CounterKey, float]) -> ExpositionPart:
     """An exposition part with no series, carrying `counts` (as `part_counters` keys them)."""
-    messages, dropped, errors, truncated = {}, {}, {}, 0
+    messages, dropped, errors, forgotten, truncated = {}, {}, {}, {}, 0
     for key, value in counts.items():
         if key[0] == "messages":
             messages[key[1:]] = int(value)
@@ -146,6 +161,8 @@ def counters_part(counts: Mapping[CounterKey, float]) -> ExpositionPart:
             dropped[key[1]] = int(value)
         elif key[0] == "errors":
             errors[key[1:]] = int(value)
+        elif key[0] == "forgotten":
+            forgotten[key[1]] = int(value)
         else:
             truncated = int(value)
-    return ExpositionPart(0, (b"",) * len(FLEET_FAMILIES), messages, dropped, truncated, errors)
+    return ExpositionPart(0, (b"",) * len(FLEET_FAMILIES), messages, dropped, truncated, errors, forgotten)

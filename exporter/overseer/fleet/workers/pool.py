@@ -17,7 +17,7 @@ from multiprocessing.process import BaseProcess
 from typing import Any, NamedTuple
 
 from overseer.config import Config
-from overseer.fleet.interface import FleetPartUnavailable
+from overseer.fleet.interface import FleetPartUnavailable, FleetStart
 from overseer.fleet.workers.process import FAILED, READY, run_worker
 from overseer.model.events import Event
 
@@ -63,9 +63,19 @@ class _Handle:
 class WorkerPool:
     """Runs `config.ingest.workers` workers; each follows the robots of its own part of the shard."""
 
-    def __init__(self, config: Config, events: EventSink | None = None) -> None:
-        """Prepare the workers of `config`; `events` receives every worker's events (None: dropped)."""
+    def __init__(
+        self,
+        config: Config,
+        events: EventSink | None = None,
+        start: Callable[[], FleetStart] | None = None,
+    ) -> None:
+        """Prepare the workers of `config`; `events` receives every worker's events (None: dropped).
+
+        `start` tells what a worker follows before it hears anything, asked anew for each worker started
+        (a restarted worker follows the inventory and the robots remembered now).
+        """
         self.config = config
+        self._start = start or FleetStart
         self.count = config.ingest.workers
         self.restarts = [0] * self.count
         self._events = events
@@ -195,7 +205,7 @@ class WorkerPool:
         events, child_events = self._context.Pipe(duplex=False)
         process = self._context.Process(
             target=run_worker,
-            args=(self.config, index, self.count, child_requests, child_events),
+            args=(self.config, index, self.count, child_requests, child_events, self._start()),
             name=f"overseer-ingest-{index}",
             daemon=True,
         )

@@ -16,6 +16,7 @@ from typing import Any
 
 from overseer.config import Config
 from overseer.fleet.documents import ComponentQuery
+from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.workers.merge import portable_robots
 from overseer.log_format import configure_logging
@@ -44,7 +45,7 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
         [part] = fleet.exposition_parts()
         return part
     if kind == "robots":
-        return fleet.robots_document()
+        return fleet.robots_document(argument)
     if kind == "robot":
         return fleet.robot_document(argument)
     if kind == "components":
@@ -53,11 +54,28 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
     if kind == "snapshot":
         snapshot = fleet.snapshot()
         return replace(snapshot, robots=tuple(portable_robots(snapshot)))
+    if kind == "inventory":
+        fleet.set_inventory(argument)
+        return None
+    if kind == "retire":
+        return fleet.retire(argument)
+    if kind == "heard":
+        return fleet.heard(bool(argument))
     raise ValueError(f"unknown request {kind!r}")
 
 
-def run_worker(config: Config, worker: int, workers: int, requests: Connection, events: Connection) -> None:
-    """The worker process: start following its robots, then answer requests until the exporter leaves."""
+def run_worker(
+    config: Config,
+    worker: int,
+    workers: int,
+    requests: Connection,
+    events: Connection,
+    start: FleetStart | None = None,
+) -> None:
+    """The worker process: start following its robots, then answer requests until the exporter leaves.
+
+    `start` is what it follows before it hears anything (its share of it: the robots it owns).
+    """
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
     # and a worker ends when the exporter closes its pipe (or dies).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -65,7 +83,7 @@ def run_worker(config: Config, worker: int, workers: int, requests: Connection, 
     configure_logging(config.log_level, config.log_format, worker)
     config = worker_config(config, worker, workers)
     try:
-        fleet = LocalFleet.build(config, _EventSender(events).send if config.events.enabled else None)
+        fleet = LocalFleet.build(config, _EventSender(events).send if config.events.enabled else None, start)
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)

@@ -2,7 +2,8 @@
 // refreshes every few seconds keeping the filter, the scroll position and the open folders.
 
 import {agoText, badge, element, getJson, timeText} from "./dom.js";
-import {renderMatches, renderRobots, renderSummary} from "./fleet.js";
+import {downText, labelTags, renderMatches, renderRobots, renderSummary} from "./fleet.js";
+import {hasLabels, renderLabelControls} from "./labels.js";
 import {fleetQuery, pageHref, readQuery, robotQuery} from "./location.js";
 import {
   MAINTENANCE, loadMaintenance, renderMaintenancePanel, renderRobotMaintenance, setUpMaintenanceForms,
@@ -14,7 +15,7 @@ const REFRESH_MS = 2000;
 const MATCH_LIMIT = 200;
 const SEARCH_DELAY_MS = 250;
 
-const openGroups = new Map();  // fleet groups the user opened or closed, by namespace
+const openGroups = new Map();  // fleet groups the user opened or closed, by grouping and group
 const openFolders = new Map();  // robot name → its folders the user opened or closed, by path
 let view = readQuery(location.search);
 let timeline = null;
@@ -41,6 +42,16 @@ function toggleLevel(state) {
   setView({...view, robot: null, levels}, view.robot === null ? "replace" : "push");
 }
 
+function groupBy(label) {
+  setView({...view, robot: null, group: label}, "replace");
+}
+
+function filterLabel(name, value) {
+  const labels = new Map(view.labels);
+  if (value === null) labels.delete(name); else labels.set(name, value);
+  setView({...view, robot: null, labels}, "replace");
+}
+
 function showError(message) {
   document.getElementById("error").textContent = message;
 }
@@ -58,9 +69,12 @@ async function renderFleet(current) {
   if (current !== view) return false;
   renderMaintenancePanel(maintenance, refresh);
   const matched = new Set(current.q && matches ? matches.robots.map((r) => r.robot) : []);
+  const labelled = current.labels.size
+    ? new Set(robots.robots.filter((r) => hasLabels(r, current.labels)).map((r) => r.robot)) : null;
   renderSummary(robots, current, toggleLevel);
+  renderLabelControls(robots.robots, current, groupBy, filterLabel);
   renderRobots(robots, current, matched, openGroups, openRobot);
-  renderMatches(matches, current, openRobot);
+  renderMatches(matches, current, labelled, openRobot);
   document.getElementById("fleet-view").hidden = false;
   document.getElementById("robot-view").hidden = true;
   return true;
@@ -95,10 +109,7 @@ async function renderRobot(current) {
   } else {
     title.replaceChildren(badge(robot.maintenance ? MAINTENANCE : (robot.up ? robot.state : "STALE")), " ",
       element("span", {class: "node-name"}, robot.robot), `: ${robot.up ? robot.state : "DOWN"}`);
-    const c = robot.counts;
-    document.getElementById("robot-facts").textContent =
-      `${robot.transport} · last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})`
-      + ` · ${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`;
+    renderRobotFacts(robot, current);
     const folders = folderMemory(current.robot);
     renderTree(tree, buildTree(robot.components), robot.generated_at, folders, showHistoryOf);
   }
@@ -111,6 +122,30 @@ async function renderRobot(current) {
   document.getElementById("robot-view").hidden = false;
   document.title = `${current.robot} — Overseer`;
   return true;
+}
+
+function renderRobotFacts(robot, current) {
+  const c = robot.counts;
+  const heard = robot.last_message !== null
+    ? `last message ${timeText(robot.last_message)} (${agoText(robot.last_message, robot.generated_at)})` : null;
+  const facts = [
+    downText(robot, robot.generated_at),
+    robot.transport || null,
+    heard,
+    `${robot.components.length} components: ${c.error} error, ${c.warn} warn, ${c.stale} stale, ${c.ok} ok`,
+  ].filter((fact) => fact !== null);
+  const tags = labelTags(robot.labels).map((tag) => {
+    const wanted = new Map([[tag.dataset.label, robot.labels[tag.dataset.label]]]);
+    const fleet = {...current, robot: null, component: null, labels: wanted};
+    const link = element("a", {href: pageHref(fleetQuery(fleet)), title: "the robots with this label"}, tag);
+    link.addEventListener("click", (event) => {
+      if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+      event.preventDefault();
+      setView(fleet, "push");
+    });
+    return link;
+  });
+  document.getElementById("robot-facts").replaceChildren(facts.join(" · "), ...tags.flatMap((tag) => [" ", tag]));
 }
 
 function allHistoryLink(robot) {

@@ -41,10 +41,15 @@ export function timeText(seconds) {
 /** How long ago a unix time was, relative to `now` (unix seconds). */
 export function agoText(seconds, now) {
   if (seconds === null || seconds === undefined) return "never";
-  const age = Math.max(0, Math.round(now - seconds));
-  if (age < 120) return `${age} s ago`;
-  if (age < 7200) return `${Math.round(age / 60)} min ago`;
-  return `${Math.round(age / 3600)} h ago`;
+  return `${durationText(now - seconds)} ago`;
+}
+
+/** A duration in seconds as "42 s", "12 min" or "3 h". */
+export function durationText(seconds) {
+  const age = Math.max(0, Math.round(seconds));
+  if (age < 120) return `${age} s`;
+  if (age < 7200) return `${Math.round(age / 60)} min`;
+  return `${Math.round(age / 3600)} h`;
 }
 
 /** GET a JSON document of the exporter; rejects with an Error carrying `status` on an HTTP error. */

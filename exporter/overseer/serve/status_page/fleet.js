@@ -1,7 +1,8 @@
-// The fleet view: counts per level, robots grouped by namespace prefix, filtered, searched and sorted,
-// and the components across the fleet that match the filter (found by the exporter, bounded).
+// The fleet view: counts per level, robots grouped by namespace prefix or by a label, filtered, searched
+// and sorted, and the components across the fleet that match the filter (found by the exporter, bounded).
 
-import {STATES, agoText, badge, element, rank, timeText, worstState} from "./dom.js";
+import {STATES, agoText, badge, durationText, element, rank, timeText, worstState} from "./dom.js";
+import {hasLabels, labelText} from "./labels.js";
 import {pageHref, robotQuery} from "./location.js";
 import {MAINTENANCE, shownState} from "./maintenance.js";
 
@@ -23,25 +24,53 @@ const COMPARE = {
     || collator.compare(a.robot, b.robot),
 };
 
-/** The robots `view` shows, sorted: level filter on the robot's level, text on its name or components.
- * A robot in maintenance has no level here: the level filters leave it out. */
+/** The robots `view` shows, sorted: level filter on the robot's level, text on its name or components,
+ * label filter on its labels. A robot in maintenance has no level here: the level filters leave it out. */
 export function visibleRobots(robots, view, matchedRobots) {
   const needle = view.q.toLowerCase();
   const shown = robots.filter((robot) =>
     (!view.levels.size || view.levels.has(shownState(robot)))
+    && hasLabels(robot, view.labels)
     && (!needle || robot.robot.toLowerCase().includes(needle) || matchedRobots.has(robot.robot)));
   return shown.sort(COMPARE[view.sort] || COMPARE.name);
 }
 
-/** Groups of robots by namespace, in the order of their first robot in `robots`. */
-export function groupRobots(robots) {
+/** Groups of robots by namespace, or by their value of the label `grouping` ("" for those without it),
+ * in the order of their first robot in `robots`; label groups `byValue` in the order of their values,
+ * the robots without the label last. */
+export function groupRobots(robots, grouping = null, byValue = false) {
   const groups = new Map();
   for (const robot of robots) {
-    const name = namespaceOf(robot.robot);
+    const name = grouping === null ? namespaceOf(robot.robot) : (robot.labels?.[grouping] ?? "");
     if (!groups.has(name)) groups.set(name, []);
     groups.get(name).push(robot);
   }
-  return groups;
+  if (grouping === null || !byValue) return groups;
+  return new Map([...groups].sort(([a], [b]) => (a === "") - (b === "") || collator.compare(a, b)));
+}
+
+function groupTitle(name, grouping) {
+  if (grouping !== null) return labelText(grouping, name);
+  return name === NO_NAMESPACE ? "(no namespace)" : `${name}/`;
+}
+
+/** Why a robot is down ("down: publisher left", "never heard: listed in the inventory"); null while up. */
+export function downText(robot, now) {
+  if (robot.up) return null;
+  switch (robot.down_reason) {
+    case "never_heard": return robot.listed ? "never heard: listed in the inventory" : "never heard";
+    case "silent": return `down: silent for ${durationText(now - robot.last_message)}`;
+    case "publisher_left": return "down: publisher left";
+    default: return "down";
+  }
+}
+
+/** The fleet's "last message" of a robot: how long ago, and when it is down, why. */
+function lastMessageText(robot, now) {
+  const reason = downText(robot, now);
+  if (reason === null) return agoText(robot.last_message, now);
+  if (robot.last_message === null || robot.down_reason === "silent") return reason;
+  return `${reason}, last message ${agoText(robot.last_message, now)}`;
 }
 
 /** The counts per level at the top; each level is a toggle of the level filter. Robots in maintenance
@@ -81,39 +110,49 @@ export function renderRobots(robotsDocument, view, matchedRobots, openGroups, on
   const shown = visibleRobots(robotsDocument.robots, view, matchedRobots);
   document.getElementById("showing").textContent =
     `Showing ${shown.length} of ${robotsDocument.robots.length} robots`;
+  const labelled = robotsDocument.robots.some((robot) => Object.keys(robot.labels || {}).length > 0);
+  const headings = ["Level", "Robot", ...(labelled ? ["Labels"] : []), "Components", "Last message"];
   const sections = [];
-  for (const [name, robots] of groupRobots(shown)) {
+  for (const [name, robots] of groupRobots(shown, view.group, view.sort === "name")) {
+    const key = `${view.group ?? ""}\u0000${name}`;
     const judged = robots.filter((r) => !r.maintenance);
     const worst = judged.length ? worstState(judged.map((r) => r.state)) : MAINTENANCE;
     const perState = [...STATES, MAINTENANCE].map((s) => [s, robots.filter((r) => shownState(r) === s).length])
       .filter(([, n]) => n);
-    const details = element("details", {class: "group", "data-group": name, open: openGroups.get(name) ?? true},
+    const details = element("details", {class: "group", "data-group": name, open: openGroups.get(key) ?? true},
       element("summary", {},
         badge(worst), " ",
-        element("span", {class: "group-name"}, name === NO_NAMESPACE ? "(no namespace)" : `${name}/`),
+        element("span", {class: "group-name"}, groupTitle(name, view.group)),
         element("small", {}, `${robots.length} robots: ${perState.map(([s, n]) => `${n} ${s}`).join(", ")}`)),
       element("table", {class: "robots"},
-        element("thead", {}, element("tr", {}, ...["Level", "Robot", "Components", "Last message"]
-          .map((h) => element("th", {}, h)))),
-        element("tbody", {}, ...robots.map((robot) => robotRow(robot, now, onOpenRobot)))));
-    details.firstChild.addEventListener("click", () => openGroups.set(name, !details.open));
+        element("thead", {}, element("tr", {}, ...headings.map((h) => element("th", {}, h)))),
+        element("tbody", {}, ...robots.map((robot) => robotRow(robot, now, labelled, onOpenRobot)))));
+    details.firstChild.addEventListener("click", () => openGroups.set(key, !details.open));
     sections.push(details);
   }
   document.getElementById("groups").replaceChildren(...sections);
 }
 
-function robotRow(robot, now, onOpenRobot) {
+function robotRow(robot, now, labelled, onOpenRobot) {
   const c = robot.counts;
   const m = robot.maintenance;
-  const seen = robot.up ? agoText(robot.last_message, now) : `down, last ${agoText(robot.last_message, now)}`;
+  const seen = lastMessageText(robot, now);
   return element("tr", {"data-robot": robot.robot, "data-state": shownState(robot),
+                        "data-down-reason": robot.up ? null : robot.down_reason,
                         class: m ? "maintenance" : (robot.up ? null : "down")},
     element("td", {}, badge(shownState(robot))),
     element("td", {class: "robot-name"}, robotLink(robot.robot, onOpenRobot)),
+    labelled ? element("td", {class: "labels"}, ...labelTags(robot.labels)) : null,
     element("td", {}, `${c.error} error · ${c.warn} warn · ${c.stale} stale · ${c.ok} ok`
       + (m ? ` (${robot.up ? robot.state : "DOWN"})` : "")),
     element("td", {}, m ? element("span", {class: "maintenance-note", title: m.comment},
       `until ${timeText(m.until)} · ${m.author}: ${m.comment} · ${seen}`) : seen));
+}
+
+/** A robot's labels as tags, sorted by name: "site=site_a". */
+export function labelTags(labels) {
+  return Object.keys(labels || {}).sort().map((name) =>
+    element("span", {class: "label", "data-label": name}, labelText(name, labels[name])));
 }
 
 /** A link to a robot's view that navigates in place (a new tab still works: it is a real link). */
@@ -127,18 +166,27 @@ export function robotLink(name, onOpenRobot) {
   return link;
 }
 
-/** The components matching the filter across the fleet, as the exporter found them (worst first). */
-export function renderMatches(matches, view, onOpenRobot) {
+/** The components matching the filter across the fleet, as the exporter found them (worst first); of
+ * `labelledRobots` only, when a label filter keeps some (the fleet's worst on them are their worst too). */
+export function renderMatches(matches, view, labelledRobots, onOpenRobot) {
   const section = document.getElementById("matches");
   section.hidden = matches === null;
   if (matches === null) return;
-  const rows = matches.components.slice();
+  const scoped = labelledRobots !== null;
+  const rows = matches.components.filter((c) => !scoped || labelledRobots.has(c.robot));
+  const total = scoped
+    ? matches.robots.reduce((sum, r) => sum + (labelledRobots.has(r.robot) ? r.matches : 0), 0)
+    : matches.total;
   if (view.sort === "name") {
     rows.sort((a, b) => collator.compare(a.robot, b.robot) || collator.compare(a.name, b.name));
   }
-  document.getElementById("matches-count").textContent = matches.truncated
-    ? `${matches.total} components match; the ${rows.length} worst are shown`
-    : `${matches.total} components match`;
+  let count = `${total} components match`;
+  if (rows.length === 0 && total > 0) {
+    count += `; none among the fleet's ${matches.limit} worst: narrow the search`;
+  } else if (rows.length < total) {
+    count += `; the ${rows.length} worst are shown`;
+  }
+  document.getElementById("matches-count").textContent = count;
   document.getElementById("matches-rows").replaceChildren(...rows.map((c) =>
     element("tr", {"data-robot": c.robot, "data-component": c.name, "data-state": c.state},
       element("td", {}, badge(c.state)),

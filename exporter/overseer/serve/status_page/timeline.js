@@ -107,6 +107,8 @@ function describe(event) {
     case "appeared": return `appeared${event.new_state ? ` as ${event.new_state}` : ""}`;
     case "missing": return "missing";
     case "expired": return "expired";
+    case "retired": return "retired";
+    case "unlisted": return "removed from the inventory";
     case "maintenance_start": return `maintenance starts (${valueOf(event, "author")}, until ${valueOf(event, "until")})`;
     case "maintenance_end": return "maintenance ends";
     default: return String(event.kind);

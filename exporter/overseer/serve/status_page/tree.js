@@ -1,5 +1,7 @@
 // A robot's components as a tree: path segments are folders ("/Power/Robot Battery" is the leaf
 // "Robot Battery" in folder "Power"), and each folder shows the worst level beneath it by severity.
+// A component the inventory expects is tagged so, and one it expects but the robot never reported
+// ("/Wheels/*" for a count of them) is tagged "not reported", with no time of last update.
 
 import {agoText, badge, element, worstState} from "./dom.js";
 
@@ -66,20 +68,36 @@ function renderNode(node, now, openFolders, onHistory) {
   const details = element("details", {class: "folder", "data-path": node.path, "data-state": node.state,
                                        open: openFolders.get(node.path) ?? node.state !== "OK"},
     element("summary", {}, badge(node.state), " ", element("span", {class: "node-name"}, node.name),
-      ...node.own.flatMap((c) => [" ", element("span", {class: "message", "data-component": c.name, "data-state": c.state}, c.message)]),
+      ...node.own.flatMap((c) => [" ", element("span", {class: "message", ...componentData(c)}, c.message),
+        ...expectationTags(c)]),
       " ", historyButton(historyName, onHistory)),
     ...[...node.children.values()].map((child) => renderNode(child, now, openFolders, onHistory)));
   details.firstChild.addEventListener("click", () => openFolders.set(node.path, !details.open));
   return details;
 }
 
-function componentParts(c, label, now) {
+function componentData(c) {
+  return {"data-component": c.name, "data-state": c.state, "data-expected": c.expected ? "true" : null,
+          "data-reported": c.reported === false ? "false" : null};
+}
+
+function expectationTags(c) {
   return [
-    element("span", {"data-component": c.name, "data-state": c.state}, badge(c.state), " ",
+    c.expected ? element("span", {class: "tag expected", title: "the inventory expects it"}, "expected") : null,
+    c.reported === false ? element("span", {class: "tag not-reported"}, "not reported") : null,
+  ].filter((tag) => tag !== null);
+}
+
+function componentParts(c, label, now) {
+  const reported = c.reported !== false;  // an older exporter says nothing of it: every component was reported
+  return [
+    element("span", componentData(c), badge(c.state), " ",
       element("span", {class: "node-name"}, label)),
+    ...expectationTags(c),
     c.hardware_id ? element("span", {class: "hardware-id"}, `[${c.hardware_id}]`) : null,
     element("span", {class: "message"}, c.message),
     c.values.length ? element("span", {class: "values"}, c.values.map((kv) => `${kv.key}=${kv.value}`).join(", ")) : null,
-    element("span", {class: "updated", title: new Date(c.last_update * 1000).toISOString()}, agoText(c.last_update, now)),
+    reported ? element("span", {class: "updated", title: new Date(c.last_update * 1000).toISOString()},
+      agoText(c.last_update, now)) : null,
   ].filter((part) => part !== null);
 }
