@@ -11,6 +11,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
 from typing import TextIO
 
+from testbed.paths import REPO
+
 ROW_PREFIX = "BENCH-ROW "
 _TICKS = os.sysconf("SC_CLK_TCK")
 _PAGE = os.sysconf("SC_PAGE_SIZE")
@@ -64,6 +66,11 @@ def _number(value: float) -> str:
     if value == int(value) and abs(value) < 1e15:
         return f"{int(value):,}"
     return f"{value:,.3g}" if abs(value) < 10 else f"{value:,.1f}"
+
+
+def repo_on_path() -> dict[str, str]:
+    """The environment a `python -m bench.…` child needs to import this tree (the caller's path kept)."""
+    return {"PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH", "")) if p)}
 
 
 def cpu_seconds(pid: int) -> float:
