@@ -207,7 +207,8 @@ def test_hostile_keys_and_payloads_are_counted_and_the_exporter_keeps_serving(tm
     }
     with (
         running_router(tmp_path) as port,
-        running_exporter(tmp_path, None, *exporter_args(port)) as exporter,
+        # One worker: hand-made keys have no publisher token, which workers follow robots by.
+        running_exporter(tmp_path, None, *exporter_args(port, "--ingest.workers=1")) as exporter,
         client_session(port) as session,
     ):
         wait_for(lambda: session.info.routers_zid(), 10, message="test session connected")

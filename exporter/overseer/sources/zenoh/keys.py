@@ -69,6 +69,24 @@ def data_subscriptions(domain: int, formats: tuple[str, ...]) -> list[str]:
     return keys
 
 
+def unnamespaced_subscriptions(domain: int, formats: tuple[str, ...]) -> list[str]:
+    """The key expressions of the diagnostics topics without a namespace, which any robot may publish on."""
+    keys = []
+    for kind in _KINDS:
+        if RMW_ZENOH in formats:
+            keys.append(f"{domain}/{kind}/*/*")
+        if BRIDGE in formats:
+            keys.append(kind)
+    return keys
+
+
+def followed_subscription(topic: DiagnosticsKey, domain: int) -> str:
+    """The key expression of one namespaced diagnostics topic, any type hash, in its key format."""
+    if topic.key_format == BRIDGE:
+        return bridge_key(topic.namespace, topic.kind)
+    return data_key(domain, topic.namespace, topic.kind, topic.type_hash)
+
+
 def liveliness_subscription(domain: int) -> str:
     """The key expression of the liveliness tokens of every diagnostics publisher on `domain`."""
     return f"{LIVELINESS_SPACE}/{domain}/*/*/*/{PUBLISHER_ENTITY}/*/*/*/$*diagnostics$*/**"

@@ -11,19 +11,27 @@ A sample of an un-namespaced topic (diagnostic_updater publishes on `/diagnostic
 namespace) belongs to the robot its publisher's node names: the sample's attachment carries the
 publisher's GID, and the publisher's liveliness token, whose hash that GID is, its node's namespace
 (`robot_naming.py`). Each publisher is a feed of its robot.
+
+With several ingest workers (or shards), a worker subscribes only to its own robots: it hears every
+publisher's liveliness token, and for each namespaced diagnostics topic of a robot it owns declares a
+subscription to that topic alone, so the router sends each worker its share and adding a worker divides
+the cost instead of multiplying it. Topics without a namespace are heard by every worker (any robot may
+publish there; the GID says whose). A namespaced publisher that declares no token (neither rmw_zenoh nor
+the bridge) is followed with one worker only.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import queue
 import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import zenoh
-from zenoh.handlers import FifoChannel
+from zenoh.handlers import Callback, FifoChannel
 
 from overseer.codec import DecodeError, cdr
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
@@ -42,10 +50,12 @@ from overseer.sources.zenoh.keys import (
     attachment_gid,
     bridge_liveliness_subscription,
     data_subscriptions,
+    followed_subscription,
     liveliness_subscription,
     parse_bridge_token,
     parse_data_key,
     parse_publisher,
+    unnamespaced_subscriptions,
 )
 from overseer.sources.zenoh.session import session_config
 
@@ -61,6 +71,7 @@ MAX_TOKENS_PER_ROBOT = 64
 MAX_PENDING_PUBLISHERS = 10_000
 MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
 MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
+MAX_FOLLOWED_TOPICS = 100_000  # per-topic subscriptions of a worker (bounded against token floods)
 CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
 
 
@@ -103,6 +114,12 @@ class ZenohSource:
         self._unattributed: dict[bytes, _Unattributed] = {}
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
+        # A worker's share: a subscription per namespaced topic of its robots, all feeding one queue.
+        self._partitioned = self._shard.count > 1 or self._shard.workers > 1
+        self._samples: queue.SimpleQueue[zenoh.Sample | None] = queue.SimpleQueue()
+        self._followed: dict[str, tuple[str, zenoh.Subscriber[Any] | None]] = {}  # key → robot, subscriber
+        self._wake = threading.Event()  # a topic to follow is waiting for its subscription
+        self.samples_heard = 0  # samples this session received, its robots' or not
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -114,9 +131,13 @@ class ZenohSource:
     def stop(self) -> None:
         """Undeclare everything and close the session."""
         self._stop.set()
+        self._wake.set()
         with self._lock:
             session, self._session = self._session, None
             declared, self._declared = self._declared, []
+            declared += [subscriber for _, subscriber in self._followed.values() if subscriber is not None]
+            self._followed.clear()
+        self._samples.put(None)
         for subscriber in declared:
             subscriber.undeclare()  # type: ignore[no-untyped-call]
         if session is not None:
@@ -131,7 +152,11 @@ class ZenohSource:
         domain, formats = self._config.domain, self._config.key_formats
         # Declared without the lock held: the liveliness history is delivered to `_on_token`, which takes it.
         declared: list[zenoh.Subscriber[Any]] = []
-        for key in data_subscriptions(domain, formats):
+        if self._partitioned:
+            threading.Thread(target=self._drain_queue, name="zenoh-data", daemon=True).start()
+        for key in unnamespaced_subscriptions(domain, formats) if self._partitioned else []:
+            declared.append(session.declare_subscriber(key, self._queued()))
+        for key in [] if self._partitioned else data_subscriptions(domain, formats):
             # Samples queue in a channel that Zenoh fills without the GIL, and a thread of ours drains it:
             # a callback would hold Zenoh's receiving thread on the GIL for every sample, so a busy moment
             # in Python would stall the link and the router would drop samples.
@@ -153,7 +178,12 @@ class ZenohSource:
             return
         log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
         pruned = time.monotonic()
-        while not self._stop.wait(TICK_SECONDS):
+        while not self._stop.is_set():
+            self._wake.wait(TICK_SECONDS)
+            self._wake.clear()
+            if self._stop.is_set():
+                break
+            self._declare_followed(session)
             self._attribute_late()
             if time.monotonic() - pruned >= PRUNE_INTERVAL_SECONDS:
                 pruned = time.monotonic()
@@ -181,7 +211,42 @@ class ZenohSource:
                 return
             self._on_data(sample)
 
+    def _queued(self) -> Callback[zenoh.Sample]:
+        """A handler putting samples on the one queue `_drain_queue` reads, from Zenoh's own thread.
+
+        It only enqueues: a worker's Python work is the ingest alone, so Zenoh's thread waits for the
+        interpreter no longer than one sample's ingest.
+        """
+        return Callback(self._samples.put, indirect=False)
+
+    def _drain_queue(self) -> None:
+        """Hand every queued sample to `_on_data` until `stop`."""
+        while (sample := self._samples.get()) is not None:
+            self._on_data(sample)
+
+    def _follow(self, topic: DiagnosticsKey, robot: str) -> None:
+        """Ask for a subscription to one namespaced topic of a robot this worker owns."""
+        key = followed_subscription(topic, self._config.domain)
+        with self._lock:
+            if key in self._followed or len(self._followed) >= MAX_FOLLOWED_TOPICS:
+                return
+            self._followed[key] = (robot, None)
+        self._wake.set()
+
+    def _declare_followed(self, session: zenoh.Session) -> None:
+        """Declare the subscriptions `_follow` asked for (not from Zenoh's callback, which must not block)."""
+        with self._lock:
+            waiting = [key for key, (_, subscriber) in self._followed.items() if subscriber is None]
+        for key in waiting:
+            subscriber = session.declare_subscriber(key, self._queued())
+            with self._lock:
+                if key in self._followed and not self._stop.is_set():
+                    self._followed[key] = (self._followed[key][0], subscriber)
+                    continue
+            subscriber.undeclare()  # type: ignore[no-untyped-call]
+
     def _on_data(self, sample: zenoh.Sample) -> None:
+        self.samples_heard += 1
         try:
             key = str(sample.key_expr)
             if key in self._foreign:
@@ -286,14 +351,14 @@ class ZenohSource:
             publisher = parse_publisher(key, self._config.domain)
             gid = b""
             if publisher is not None:
-                parsed, gid = publisher.topic, publisher.gid
-                robot = self._naming.of_topic(parsed.namespace)
+                topic, gid = publisher.topic, publisher.gid
+                robot = self._naming.of_topic(topic.namespace)
                 robot = robot if robot is not None else self._naming.of_node(publisher.node_namespace)
             else:
                 bridged = parse_bridge_token(key)
                 if bridged is None:
                     return
-                robot = bridged.namespace or self._config.unnamespaced_robot
+                topic, robot = bridged, bridged.namespace or self._config.unnamespaced_robot
             if robot is None:
                 self._model.count_source_error(TRANSPORT, "invalid_namespace")
                 return
@@ -304,6 +369,8 @@ class ZenohSource:
                 self._release(gid, robot)
             if not self._shard.owns(robot):
                 return
+            if alive and self._partitioned and topic.namespace:
+                self._follow(topic, robot)  # a robot beyond the cap too: its samples are counted as dropped
             with self._lock:
                 tokens = self._tokens.get(robot)
                 if alive:
@@ -331,6 +398,11 @@ class ZenohSource:
                 del self._ingests[key]
             for robot in [robot for robot in self._tokens if robot not in known]:
                 del self._tokens[robot]
+            gone = [key for key, (robot, _) in self._followed.items() if robot not in known]
+            unfollowed = [self._followed.pop(key)[1] for key in gone]
             owns = self._shard.owns
             for gid in [gid for gid, robot in self._publishers.items() if robot not in known and owns(robot)]:
                 del self._publishers[gid]
+        for subscriber in unfollowed:
+            if subscriber is not None:
+                subscriber.undeclare()  # type: ignore[no-untyped-call]

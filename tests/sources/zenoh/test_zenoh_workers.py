@@ -1,0 +1,55 @@
+"""Ingest workers over Zenoh: each hears its own robots' samples only, so a worker divides the cost.
+
+Two sources, as two ingest workers run them, follow one simulated fleet through a real router: each
+model holds exactly the robots its worker owns, and each session receives only its robots' samples
+(with the wildcard subscription of one worker, each would receive every sample and drop the others').
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from overseer.config.zenoh import ZenohConfig
+from overseer.model import FleetModel
+from overseer.model.shard import Shard
+from overseer.sources.zenoh.source import ZenohSource
+from testbed.processes import running_simulator, wait_for
+from testbed.zenoh import endpoint, running_router, simulator_args
+
+ROBOTS = 8
+WORKERS = 2
+
+
+def test_each_worker_receives_only_the_samples_of_the_robots_it_owns(tmp_path: Path) -> None:
+    names = {f"robot{index}" for index in range(1, ROBOTS + 1)}
+    shards = [Shard().for_worker(worker, WORKERS) for worker in range(WORKERS)]
+    owned = [{name for name in names if shard.owns(name)} for shard in shards]
+    assert all(owned)  # the hash gives each worker some of the eight
+    with running_router(tmp_path) as port:
+        config = ZenohConfig(enabled=True, mode="client", connect=(endpoint(port),))
+        models = [FleetModel() for _ in shards]
+        sources = [ZenohSource(config, model, shard) for model, shard in zip(models, shards, strict=True)]
+        for source in sources:
+            source.start()
+        try:
+            with running_simulator(tmp_path, 0, *simulator_args(port, f"--robots={ROBOTS}", "--rate=5")):
+
+                def every_robot_heard() -> bool:
+                    heard = [{robot.name for robot in model.snapshot().robots} for model in models]
+                    return heard == owned and all(
+                        robot.components for model in models for robot in model.snapshot().robots
+                    )
+
+                wait_for(every_robot_heard, 30, message="each worker's robots, and only those, heard")
+                before = [source.samples_heard for source in sources]
+                time.sleep(3)
+                heard = [source.samples_heard - start for source, start in zip(sources, before, strict=True)]
+        finally:
+            for source in sources:
+                source.stop()
+    published = ROBOTS * 5 * 3  # robots x rate x seconds, roughly
+    for worker, samples in enumerate(heard):
+        share = len(owned[worker]) / ROBOTS
+        # Its own robots' samples (give or take a publication at each end), never the whole fleet's.
+        assert 0.6 * share * published <= samples <= 1.4 * share * published, (worker, samples, share)
