@@ -74,7 +74,7 @@ def test_a_file_that_is_not_overseers_is_left_alone_and_said_so(
         other.execute("CREATE TABLE mine (x)")
     registry = RobotRegistry(str(path))
     assert registry.load() == [] and not registry.save(HEARD)
-    assert "not Overseer's" in caplog.text
+    assert "not an Overseer event database" in caplog.text
     with sqlite3.connect(path) as other:
         assert [row[0] for row in other.execute("SELECT name FROM sqlite_master")] == ["mine"]
 

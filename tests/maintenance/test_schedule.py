@@ -214,7 +214,7 @@ def test_a_database_that_is_not_overseers_is_refused_with_its_reason(tmp_path: P
 
     other = tmp_path / "other.db"
     sqlite3.connect(other).execute("CREATE TABLE mine (x)").connection.commit()
-    with pytest.raises(StoreUnavailable, match="not Overseer's"):
+    with pytest.raises(StoreUnavailable, match="not an Overseer event database"):
         WindowStore(str(other))
     with pytest.raises(StoreUnavailable, match="does not exist"):
         WindowStore(str(tmp_path / "missing" / "x.db"))

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from overseer.database import claim
 from overseer.history.query import EventQuery, encode_cursor
 from overseer.levels import Level
 from overseer.model.events import Event
@@ -39,7 +40,7 @@ FLUSH_INTERVAL_SECONDS = 0.25
 PRUNE_INTERVAL_SECONDS = 60.0
 DEFAULT_QUEUE_LIMIT = 200_000
 DROP_REASONS = ("queue_full", "write_error", "store_unavailable")
-APPLICATION_ID = 0x4F565352  # "OVSR": marks the file as an Overseer event database
+
 SIZE_CAP_TARGET = 0.9  # pruning for size leaves the database at this share of the cap
 
 _SCHEMA = """
@@ -355,13 +356,7 @@ def _open_database(path: str) -> sqlite3.Connection:
         raise OSError(f"directory {str(directory)!r} does not exist")
     connection = _connect(path)
     try:
-        tables = {row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        application_id = connection.execute("PRAGMA application_id").fetchone()[0]
-        if tables and application_id != APPLICATION_ID:
-            raise sqlite3.DatabaseError("it is an SQLite database, but not an Overseer event database")
-        if not tables:
-            connection.execute("PRAGMA auto_vacuum = INCREMENTAL")  # only takes effect before a table exists
-            connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        claim(connection, ["auto_vacuum = INCREMENTAL"])
         mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
         if str(mode).lower() != "wal":
             raise sqlite3.OperationalError(f"cannot switch to WAL mode (journal mode is {mode})")

@@ -15,12 +15,12 @@ import threading
 from collections.abc import Iterable
 from pathlib import Path
 
+from overseer.database import claim
 from overseer.model import RememberedRobot
 from overseer.model.state import RememberedComponent
 
 log = logging.getLogger(__name__)
 
-APPLICATION_ID = 0x4F565352  # "OVSR": the event history's mark; the three share the file
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS robots_heard (
@@ -116,14 +116,7 @@ class RobotRegistry:
             try:
                 connection = sqlite3.connect(self.path, timeout=10, check_same_thread=False)
                 try:
-                    tables = {
-                        row[0]
-                        for row in connection.execute("SELECT name FROM sqlite_master WHERE type='table'")
-                    }
-                    if tables and connection.execute("PRAGMA application_id").fetchone()[0] != APPLICATION_ID:
-                        raise sqlite3.DatabaseError("it is an SQLite database, but not Overseer's")
-                    if not tables:
-                        connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                    claim(connection)
                     connection.execute("PRAGMA journal_mode = WAL")
                     connection.executescript(_SCHEMA)
                 except BaseException:

@@ -12,9 +12,8 @@ import sqlite3
 import threading
 from pathlib import Path
 
+from overseer.database import claim
 from overseer.model.maintenance import RobotSelector, Window
-
-APPLICATION_ID = 0x4F565352  # "OVSR": the event history's mark; the two share the file
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS maintenance_windows (
@@ -134,13 +133,7 @@ class WindowStore:
                 self.path, timeout=5.0, isolation_level=None, check_same_thread=False
             )
             try:
-                tables = {
-                    row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type='table'")
-                }
-                if tables and connection.execute("PRAGMA application_id").fetchone()[0] != APPLICATION_ID:
-                    raise sqlite3.DatabaseError("it is an SQLite database, but not Overseer's")
-                if not tables:
-                    connection.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+                claim(connection)
                 connection.execute("PRAGMA journal_mode = WAL")
                 connection.executescript(_SCHEMA)
             except BaseException:
