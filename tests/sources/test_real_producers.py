@@ -127,6 +127,12 @@ def test_a_node_restarted_while_the_exporter_listens_comes_back_as_it_was(
         wait_for(
             lambda: not (exporter.robot("robot_r") or {}).get("up"), 3, interval=0.1, message="down at once"
         )
+        # The history records the down before the node returns (a loaded machine may take a moment).
+        wait_for(
+            lambda: any(e["kind"] == "robot_down" for e in events(exporter, "robot_r")),
+            10,
+            message="robot_down recorded",
+        )
         with updaters(tmp_path, dds_domain, node):
             wait_for(lambda: (exporter.robot("robot_r") or {}).get("up"), 30, message="up again")
             seen = watch(exporter, "robot_r", 7)
