@@ -13,7 +13,7 @@ from pathlib import Path
 from overseer.config.zenoh import ZenohConfig
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.zenoh.source import ZenohSource
+from overseer.sources.zenoh.source import QUEUE_CAPACITY, ZenohSource
 from testbed.processes import running_simulator, wait_for
 from testbed.zenoh import endpoint, running_router, simulator_args
 
@@ -53,3 +53,13 @@ def test_each_worker_receives_only_the_samples_of_the_robots_it_owns(tmp_path: P
         share = len(owned[worker]) / ROBOTS
         # Its own robots' samples (give or take a publication at each end), never the whole fleet's.
         assert 0.6 * share * published <= samples <= 1.4 * share * published, (worker, samples, share)
+
+
+def test_a_worker_whose_ingest_falls_behind_drops_and_counts_instead_of_growing() -> None:
+    # Not started: nothing drains the queue, as when a flood outruns the ingest.
+    model = FleetModel()
+    source = ZenohSource(ZenohConfig(enabled=True), model, Shard().for_worker(0, WORKERS))
+    handler = source._queued()  # the handler every subscription of a worker is declared with
+    for _ in range(QUEUE_CAPACITY + 5):
+        handler(object())  # type: ignore[arg-type]
+    assert model.snapshot().message_counts.get(("zenoh", "dropped")) == 5

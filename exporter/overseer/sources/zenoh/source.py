@@ -73,6 +73,7 @@ MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
 MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
 MAX_FOLLOWED_TOPICS = 100_000  # per-topic subscriptions of a worker (bounded against token floods)
 CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
+QUEUE_CAPACITY = 2 * CHANNEL_CAPACITY  # samples waiting for a worker's ingest, all its subscriptions together
 
 
 @dataclass
@@ -217,7 +218,13 @@ class ZenohSource:
         It only enqueues: a worker's Python work is the ingest alone, so Zenoh's thread waits for the
         interpreter no longer than one sample's ingest.
         """
-        return Callback(self._samples.put, indirect=False)
+        return Callback(self._enqueue, indirect=False)
+
+    def _enqueue(self, sample: zenoh.Sample) -> None:
+        if self._samples.qsize() < QUEUE_CAPACITY:
+            self._samples.put(sample)
+        else:  # the ingest is that far behind (a flood): drop and count rather than grow without bound
+            self._model.count_message(TRANSPORT, "dropped")
 
     def _drain_queue(self) -> None:
         """Hand every queued sample to `_on_data` until `stop`."""
