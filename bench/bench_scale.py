@@ -52,7 +52,12 @@ def run(robots: int, workers: int, profile: str, seconds: float) -> list[Row]:
         tempfile.TemporaryDirectory() as tmp,
         running_router_process(Path(tmp)) as (port, router),
         running_exporter(
-            Path(tmp), None, *exporter_args(port), f"--ingest.workers={workers}", "--log.level=warning"
+            Path(tmp),
+            None,
+            *exporter_args(port),
+            f"--ingest.workers={workers}",
+            f"--fleet.max-robots={2 * robots}",  # the cap is shared out by hash: headroom, not a limit
+            "--log.level=warning",
         ) as exporter,
     ):
         pid = exporter.process.pid
