@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 import urllib.error
 from contextlib import ExitStack
 from pathlib import Path
@@ -100,13 +101,17 @@ def test_scripted_incidents_are_recorded_served_logged_and_kept_across_a_restart
         assert any(line["logger"] == "overseer.app" for line in json_log_lines(exporter))
 
         exporter.stop()
+        # Stopped for longer than robot1's timeout: the restarted exporter remembers it down, and its next
+        # message is a new run (a restart within the timeout continues the run, with no event).
+        time.sleep(ROBOT_TIMEOUT + 1)
         newest_before = max(e["id"] for e in before_restart)
         restarted = stack.enter_context(running_exporter(tmp_path, dds_domain, *flags))
-        wait_for(
+        again_up = wait_for(
             lambda: [e for e in find(restarted, kind="robot_up", robot="robot1") if e["id"] > newest_before],
             30,
             message="robot1 up again after the restart",
         )
+        assert [(e["old_state"], e["message"]) for e in again_up] == [("STALE", "diagnostics received again")]
         again = events(restarted)
         by_id = {e["id"]: e for e in again}
         assert len(by_id) == len(again)

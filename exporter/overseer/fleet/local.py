@@ -146,8 +146,11 @@ class TransitionWatch:
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
-        """Listen to the model, and check its snapshots every `CHECK_INTERVAL_SECONDS`."""
+        """Listen to the model, and check its snapshots now and every `CHECK_INTERVAL_SECONDS`."""
         self._model.set_level_listener(self.detector.on_level_changes)
+        # The first look, before any transport delivers: the robots listed and remembered are seen as
+        # they were, so a remembered robot that speaks at once continues its run rather than "come up".
+        self.detector.check(self._model.told_snapshot())
         self._thread = threading.Thread(target=self._check_loop, name="event-detector", daemon=True)
         self._thread.start()
 
