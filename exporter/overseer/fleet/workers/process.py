@@ -7,12 +7,13 @@ event history) on the other. The worker ends when the exporter closes the reques
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import signal
 import threading
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import Any, NoReturn
 
 from overseer.config import Config
 from overseer.fleet.documents import ComponentQuery
@@ -71,11 +72,33 @@ def run_worker(
     requests: Connection,
     events: Connection,
     start: FleetStart | None = None,
-) -> None:
+) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
-    `start` is what it follows before it hears anything (its share of it: the robots it owns).
+    `start` is what it follows before it hears anything (its share of it: the robots it owns). Once its
+    fleet has stopped, the process ends at once, without the interpreter's shutdown: that shutdown can
+    hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
+    worker left behind by a dead exporter would hold its robots' readers for good.
     """
+    status = 1
+    try:
+        status = _serve(config, worker, workers, requests, events, start)
+    except BaseException:  # the exporter went while this worker started (its READY found no reader)
+        log.exception("ingest worker %d ended", worker)
+    finally:
+        logging.shutdown()
+        os._exit(status)
+
+
+def _serve(
+    config: Config,
+    worker: int,
+    workers: int,
+    requests: Connection,
+    events: Connection,
+    start: FleetStart | None,
+) -> int:
+    """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
     # and a worker ends when the exporter closes its pipe (or dies).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -88,7 +111,7 @@ def run_worker(
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)
         requests.send((FAILED, f"{type(error).__name__}: {error}"))
-        return
+        return 1
     requests.send((READY, None))
     while True:
         try:
@@ -105,6 +128,7 @@ def run_worker(
         except (BrokenPipeError, OSError):
             break
     fleet.stop()
+    return 0
 
 
 class _EventSender:
