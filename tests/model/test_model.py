@@ -7,6 +7,7 @@ import re
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
+from overseer.model.expiry import expiry_interval
 from overseer.model.state import StaleOverride
 
 
@@ -153,6 +154,12 @@ def test_vanished_component_is_forgotten_after_expiry() -> None:
     model.apply("r1", array(status("/kept")), "dds")
     model.expire()
     assert list(model.snapshot().robots[0].components) == [("/kept", "")]
+
+
+def test_expiry_looks_often_enough_to_be_at_most_a_hundredth_late_and_no_more_than_that() -> None:
+    assert expiry_interval(8) == 1.0  # a short expiry (the tests'): every second
+    assert expiry_interval(3600) == 36.0  # an hour: at most 36 s late
+    assert expiry_interval(7 * 86400) == 60.0  # the default week: once a minute, not 60 times as often
 
 
 def test_discovered_robot_without_messages_is_down_until_it_speaks() -> None:
