@@ -3,8 +3,15 @@
 rclpy hands a subscription's callback the message and, at most, its timestamps and sequence numbers; the
 publisher's GID, which tells which node published it (`/diagnostics` is shared by every node of every
 robot on a domain), stays in rcl's `rmw_message_info_t`. So the source's subscriptions are left out of any
-executor: rcl calls `on_new_message` (from the middleware's thread) when messages arrive, and `take` reads
-them, serialized, with their message info, through `rcl_take_serialized_message`.
+executor: rcl wakes the source when messages arrive (`wake_on_new_message`), and `take` reads them,
+serialized, with their message info, through `rcl_take_serialized_message`.
+
+The wake-up runs no Python. rcl calls it from the middleware's receive thread, which holds its receive
+lock meanwhile, and rclpy holds the GIL in calls that wait for that lock (`create_subscription`): a
+Python callback there waited for the GIL while the node's thread waited for the lock, and the exporter
+froze (seen under load in CI). The callback is libc's `eventfd_write(fd, count)` itself, the eventfd's
+number passed as rcl's `user_data`: rcl calls `callback(user_data, count)`, and both arguments go in the
+registers `eventfd_write(int fd, eventfd_t value)` reads them from (x86-64 and AArch64 calling conventions).
 
 The structures below are rcl's and rmw's (Jazzy: `RMW_GID_STORAGE_SIZE` 16); rclpy has loaded the
 libraries before this module is imported.
@@ -13,7 +20,6 @@ libraries before this module is imported.
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Callable
 from typing import NamedTuple
 
 RMW_GID_STORAGE_SIZE = 16
@@ -58,9 +64,6 @@ class _MessageInfo(ctypes.Structure):  # rmw_message_info_t
     ]
 
 
-# rcl_event_callback_t: void (*)(const void * user_data, size_t number_of_events)
-EventCallback = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_size_t)
-
 _rcl = ctypes.CDLL("librcl.so")
 _rcutils = ctypes.CDLL("librcutils.so")
 _rcutils.rcutils_get_default_allocator.restype = _Allocator
@@ -76,8 +79,13 @@ _rcl.rcl_take_serialized_message.argtypes = [
     ctypes.POINTER(_MessageInfo),
     ctypes.c_void_p,
 ]
-_rcl.rcl_subscription_set_on_new_message_callback.argtypes = [ctypes.c_void_p, EventCallback, ctypes.c_void_p]
-_NO_CALLBACK = EventCallback()  # a NULL function pointer
+# rcl_event_callback_t, void (*)(const void * user_data, size_t number_of_events): eventfd_write's address
+_rcl.rcl_subscription_set_on_new_message_callback.argtypes = [
+    ctypes.c_void_p,
+    ctypes.c_void_p,
+    ctypes.c_void_p,
+]
+_EVENTFD_WRITE = ctypes.cast(ctypes.CDLL(None).eventfd_write, ctypes.c_void_p).value
 
 
 class TakenMessage(NamedTuple):
@@ -118,16 +126,15 @@ class RawTaker:
         _rcutils.rcutils_uint8_array_fini(ctypes.byref(self._message))
 
 
-def on_new_message(subscription: int, callback: Callable[[int], None] | None) -> object:
-    """Have rcl call `callback(number_of_new_messages)` as messages arrive (None: stop).
+def wake_on_new_message(subscription: int, eventfd: int | None) -> None:
+    """Have rcl add the number of each batch of new messages to `eventfd` as they arrive (None: stop).
 
-    What it returns must be kept alive for as long as the callback is set.
+    Setting it when messages are waiting already adds their number at once. Clearing it waits for a
+    wake-up under way to end, so the eventfd may be closed afterwards.
     """
-    if callback is None:
-        _rcl.rcl_subscription_set_on_new_message_callback(subscription, _NO_CALLBACK, None)
-        return None
-    handle = EventCallback(lambda _user_data, count: callback(count))
-    result = _rcl.rcl_subscription_set_on_new_message_callback(subscription, handle, None)
+    if eventfd is None:
+        _rcl.rcl_subscription_set_on_new_message_callback(subscription, None, None)
+        return
+    result = _rcl.rcl_subscription_set_on_new_message_callback(subscription, _EVENTFD_WRITE, eventfd)
     if result != RCL_RET_OK:
         raise OSError(f"rcl_subscription_set_on_new_message_callback failed with {result}")
-    return handle

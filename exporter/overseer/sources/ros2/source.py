@@ -10,13 +10,16 @@ to the same ingest as every transport's (skip-unchanged, the compiled decoder, t
 A topic's subscription is reliable while every publisher of it is, best-effort from the first best-effort
 one on (a reliable subscription never hears it). The graph also tells when a robot's diagnostics
 publishers have all left: the robot is down at once, as with Zenoh's liveliness. Graph work runs in the
-node's thread (`node.py`); messages are taken in a thread of the source's own as rcl says they arrive.
+node's thread (`node.py`); messages are taken in a thread of the source's own, woken through an eventfd
+per subscription that rcl writes to as messages arrive (`rcl_take.py`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
-import queue
+import os
+import select
 import threading
 import time
 from dataclasses import dataclass, field
@@ -33,7 +36,7 @@ from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.ros2 import node as ros_node
-from overseer.sources.ros2.rcl_take import RawTaker, on_new_message
+from overseer.sources.ros2.rcl_take import RawTaker, wake_on_new_message
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_ros_topic
 
 log = logging.getLogger(__name__)
@@ -79,11 +82,10 @@ class _Topic:
     robot: str | None  # None: an un-namespaced topic, whose publishers' nodes name their robots
     subscription: Subscription
     reliable: bool
-    callback: object = None  # rcl's handle of the new-message callback, kept alive while it is set
+    wake: int  # the eventfd rcl adds the number of new messages to
     publishers: dict[bytes, _Publisher] = field(default_factory=dict)
     graph_count: int = -1  # publishers in the graph at the last look
     dirty: bool = True  # look up its publishers in the graph at the next discovery
-    closed: bool = False
 
 
 class Ros2Source:
@@ -111,7 +113,9 @@ class Ros2Source:
         self._ignored: set[str] = set()  # topics not ours: another type, another shard, the cap
         self._lock = threading.Lock()  # publishers' pending messages and ingests, between the two threads
         self._taking = threading.Lock()  # held while messages are taken: a subscription goes only between
-        self._arrived: queue.SimpleQueue[_Topic | None] = queue.SimpleQueue()
+        self._poll = select.epoll()  # every topic's wake-up eventfd, and `_stopping`
+        self._stopping = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._woken: dict[int, _Topic] = {}  # wake-up eventfd → its topic, changed under `_taking`
         self._taker: threading.Thread | None = None
         self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) in the graph
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
@@ -119,6 +123,7 @@ class Ros2Source:
     def start(self) -> None:
         """Join the graph, take messages as they arrive, and look for robots every period from now on."""
         self._ros = ros_node.acquire(self._node_name, self._config.domain)
+        self._poll.register(self._stopping, select.EPOLLIN)
         self._taker = threading.Thread(target=self._take_loop, name="ros2-take", daemon=True)
         self._taker.start()
         self._ros.call(self._discover)
@@ -130,9 +135,12 @@ class Ros2Source:
         if ros is None:
             return
         ros_node.leave(ros, self._end)
-        self._arrived.put(None)
+        os.eventfd_write(self._stopping, 1)
         if self._taker is not None:
             self._taker.join(timeout=5)
+        if self._taker is None or not self._taker.is_alive():
+            self._poll.close()
+            os.close(self._stopping)
 
     @property
     def followed_topics(self) -> dict[str, bool]:
@@ -195,19 +203,26 @@ class Ros2Source:
             DiagnosticArray, name, lambda _: None, subscription_qos(reliable), raw=True
         )
         previous = self._topics.get(name)
-        topic = _Topic(name, kind, robot, subscription, reliable)
+        topic = _Topic(
+            name, kind, robot, subscription, reliable, os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        )
         if previous is not None:
             topic.publishers = previous.publishers
         self._topics[name] = topic
-        topic.callback = on_new_message(subscription.handle.pointer, lambda _count: self._arrived.put(topic))
-        self._arrived.put(topic)  # what arrived before the callback was set
+        with self._taking:
+            self._woken[topic.wake] = topic
+        self._poll.register(topic.wake, select.EPOLLIN)
+        wake_on_new_message(subscription.handle.pointer, topic.wake)
+        os.eventfd_write(topic.wake, 1)  # what arrived before the wake-up was set
 
     def _unfollow(self, ros: ros_node.RosNode, name: str) -> None:
         topic = self._topics.pop(name)
         with self._taking:
-            topic.closed = True
-            on_new_message(topic.subscription.handle.pointer, None)
+            wake_on_new_message(topic.subscription.handle.pointer, None)
             ros.node.destroy_subscription(topic.subscription)
+            del self._woken[topic.wake]
+            self._poll.unregister(topic.wake)
+            os.close(topic.wake)
 
     def _look_up_publishers(self, ros: ros_node.RosNode, topic: _Topic) -> None:
         """The topic's publishers in the graph: their QoS, their nodes, and which have left.
@@ -308,15 +323,20 @@ class Ros2Source:
         taker = RawTaker()
         try:
             while True:
-                topic = self._arrived.get()
-                if topic is None:
-                    return
-                with self._taking:
-                    if topic.closed:
-                        continue
-                    address = topic.subscription.handle.pointer
-                    while (message := taker.take(address)) is not None:
-                        self._on_message(topic, message.payload, message.publisher_gid)
+                for wake, _ in self._poll.poll():  # the GIL is released while it waits
+                    if wake == self._stopping:
+                        return
+                    with self._taking:
+                        topic = self._woken.get(wake)
+                        if topic is None:  # unfollowed since it woke
+                            continue
+                        # Messages arriving from now on wake it again. Nothing to read: the wake-up was
+                        # of a topic unfollowed since, whose eventfd's number a new topic's has taken.
+                        with contextlib.suppress(BlockingIOError):
+                            os.eventfd_read(topic.wake)
+                        address = topic.subscription.handle.pointer
+                        while (message := taker.take(address)) is not None:
+                            self._on_message(topic, message.payload, message.publisher_gid)
         except Exception:  # the thread ends; the source says why
             log.exception("taking ROS 2 messages failed")
         finally:
