@@ -51,7 +51,11 @@ def test_robots_heard_are_remembered_down_across_a_restart_and_come_back_as_they
             wait_for(lambda: all(r["up"] for r in robots(first).values()) and len(robots(first)) == 2, 30)
         wait_for(lambda: not any(r["up"] for r in robots(first).values()), 15, message="both down")
         wait_for(
-            lambda: all(events(first, name)[-1][0] == "robot_down" for name in ("robot1", "robot2")),
+            # Events are written a quarter second at a time: none may be written yet when both are down.
+            lambda: all(
+                (recorded := events(first, name)) and recorded[-1][0] == "robot_down"
+                for name in ("robot1", "robot2")
+            ),
             10,
             message="robot_down recorded",
         )
