@@ -297,3 +297,24 @@ def test_best_effort_writers_are_heard_beside_reliable_ones_on_one_topic(
 
         wait_for(heard, 30, interval=0.5, message="both writers of mixed, and quick")
     assert "best-effort, as a writer of it is" in exporter.log()
+
+
+def test_a_best_effort_writer_found_before_any_reader_is_read_best_effort(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    """A writer already there when the exporter starts is discovered before the topic has a reader."""
+    statuses = (DiagnosticStatus(1, "/node_c/battery", "low", "", ()),)
+    with (
+        raw_diagnostics_writer(dds_domain, "rt/early/diagnostics", best_effort=True) as early,
+        running_exporter(tmp_path, dds_domain, "--ingest.workers=1") as exporter,
+    ):
+
+        def heard() -> bool:
+            early.write(encode_diagnostic_array(DiagnosticArray(0, 0, "", statuses)))
+            robot = exporter.robot("early")
+            return robot is not None and robot["up"] and len(robot["components"]) == 1
+
+        wait_for(heard, 30, interval=0.5, message="the best-effort writer that was there first")
+        log = exporter.log()
+    assert "reading rt/early/diagnostics on domain" in log
+    assert "best-effort, as a writer of it is" in log

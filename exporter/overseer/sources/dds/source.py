@@ -300,12 +300,10 @@ class DdsSource:
         if topic_name in session.best_effort_topics:
             return
         session.best_effort_topics.add(topic_name)
+        log.info("reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id)
         reader = session.readers.pop(topic_name, None)
         if reader is not None:
             reader.__del__()  # `_subscribe` creates its best-effort successor
-            log.info(
-                "reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id
-            )
 
     def _subscribe(self, session: _DomainSession, topic_name: str) -> None:
         parsed = parse_dds_topic(topic_name)
