@@ -88,6 +88,11 @@ class _Topic:
     dirty: bool = True  # look up its publishers in the graph at the next discovery
 
 
+def _new_eventfd() -> int:
+    """A counter the take thread can wait on: read without blocking, closed on exec."""
+    return os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+
+
 class Ros2Source:
     """Follows the robots of `shard` in the ROS graph of `config.domain`, as node `node_name`."""
 
@@ -113,8 +118,8 @@ class Ros2Source:
         self._ignored: set[str] = set()  # topics not ours: another type, another shard, the cap
         self._lock = threading.Lock()  # publishers' pending messages and ingests, between the two threads
         self._taking = threading.Lock()  # held while messages are taken: a subscription goes only between
-        self._poll = select.epoll()  # every topic's wake-up eventfd, and `_stopping`
-        self._stopping = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._poll: select.epoll | None = None  # every topic's wake-up eventfd, and `_stopping`, once started
+        self._stopping = -1
         self._woken: dict[int, _Topic] = {}  # wake-up eventfd → its topic, changed under `_taking`
         self._taker: threading.Thread | None = None
         self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) in the graph
@@ -122,9 +127,11 @@ class Ros2Source:
 
     def start(self) -> None:
         """Join the graph, take messages as they arrive, and look for robots every period from now on."""
+        poll, self._stopping = select.epoll(), _new_eventfd()
+        poll.register(self._stopping, select.EPOLLIN)
+        self._poll = poll
         self._ros = ros_node.acquire(self._node_name, self._config.domain)
-        self._poll.register(self._stopping, select.EPOLLIN)
-        self._taker = threading.Thread(target=self._take_loop, name="ros2-take", daemon=True)
+        self._taker = threading.Thread(target=self._take_loop, args=(poll,), name="ros2-take", daemon=True)
         self._taker.start()
         self._ros.call(self._discover)
         self._task = self._ros.every(DISCOVERY_PERIOD_SECONDS, self._discover)
@@ -138,9 +145,10 @@ class Ros2Source:
         os.eventfd_write(self._stopping, 1)
         if self._taker is not None:
             self._taker.join(timeout=5)
-        if self._taker is None or not self._taker.is_alive():
+        if (self._taker is None or not self._taker.is_alive()) and self._poll is not None:
             self._poll.close()
             os.close(self._stopping)
+            self._poll, self._stopping = None, -1
 
     @property
     def followed_topics(self) -> dict[str, bool]:
@@ -203,14 +211,13 @@ class Ros2Source:
             DiagnosticArray, name, lambda _: None, subscription_qos(reliable), raw=True
         )
         previous = self._topics.get(name)
-        topic = _Topic(
-            name, kind, robot, subscription, reliable, os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
-        )
+        topic = _Topic(name, kind, robot, subscription, reliable, _new_eventfd())
         if previous is not None:
             topic.publishers = previous.publishers
         self._topics[name] = topic
         with self._taking:
             self._woken[topic.wake] = topic
+        assert self._poll is not None, "topics are followed only once started"
         self._poll.register(topic.wake, select.EPOLLIN)
         wake_on_new_message(subscription.handle.pointer, topic.wake)
         os.eventfd_write(topic.wake, 1)  # what arrived before the wake-up was set
@@ -221,7 +228,8 @@ class Ros2Source:
             wake_on_new_message(topic.subscription.handle.pointer, None)
             ros.node.destroy_subscription(topic.subscription)
             del self._woken[topic.wake]
-            self._poll.unregister(topic.wake)
+            if self._poll is not None:
+                self._poll.unregister(topic.wake)
             os.close(topic.wake)
 
     def _look_up_publishers(self, ros: ros_node.RosNode, topic: _Topic) -> None:
@@ -319,11 +327,11 @@ class Ros2Source:
                 self._model.publisher_left(robot)
                 log.info("robot %s: its last diagnostics publisher left the graph", robot)
 
-    def _take_loop(self) -> None:
+    def _take_loop(self, poll: select.epoll) -> None:
         taker = RawTaker()
         try:
             while True:
-                for wake, _ in self._poll.poll():  # the GIL is released while it waits
+                for wake, _ in poll.poll():  # the GIL is released while it waits
                     if wake == self._stopping:
                         return
                     with self._taking:
