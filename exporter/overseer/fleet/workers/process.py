@@ -83,7 +83,7 @@ def run_worker(
     status = 1
     try:
         status = _serve(config, worker, workers, requests, events, start)
-    except BaseException:  # the exporter went while this worker started (its READY found no reader)
+    except BaseException:  # whatever ends it (the exporter gone, a signal): `_exit` would say nothing
         log.exception("ingest worker %d ended", worker)
     finally:
         logging.shutdown()
