@@ -41,6 +41,7 @@ class RobotRegistry:
         self.path = path
         self._lock = threading.Lock()
         self._connection: sqlite3.Connection | None = None
+        self._closed = False
         self.problem: str | None = None
         directory = Path(path).parent
         if not directory.is_dir():
@@ -105,14 +106,15 @@ class RobotRegistry:
                 self._failed("write", error)
 
     def close(self) -> None:
-        """Close the database."""
+        """Close the database for good: a save still running then must not open it again."""
         with self._lock:
+            self._closed = True
             if self._connection is not None:
                 self._connection.close()
                 self._connection = None
 
     def _connect(self) -> sqlite3.Connection | None:
-        if self._connection is None and self.problem is None:
+        if self._connection is None and self.problem is None and not self._closed:
             try:
                 connection = sqlite3.connect(self.path, timeout=10, check_same_thread=False)
                 try:

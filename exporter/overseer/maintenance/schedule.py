@@ -83,10 +83,12 @@ class MaintenanceSchedule:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop telling."""
+        """Stop telling, and close the windows' database."""
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
+        if self.store is not None:
+            self.store.close()
 
     def windows(self, now: float) -> list[Window]:
         """Every window ending after a day ago: one-off ones, and the recurring ones' occurrences near now."""

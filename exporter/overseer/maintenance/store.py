@@ -48,6 +48,7 @@ class WindowStore:
         self.path = path
         self._lock = threading.Lock()
         self._connection: sqlite3.Connection | None = None
+        self._closed = False
         directory = Path(path).parent
         if not directory.is_dir():
             raise StoreUnavailable(
@@ -118,8 +119,9 @@ class WindowStore:
                 )
 
     def close(self) -> None:
-        """Close the database."""
+        """Close the database for good: the last connection to close removes its write-ahead log."""
         with self._lock:
+            self._closed = True
             if self._connection is not None:
                 self._connection.close()
                 self._connection = None
@@ -128,6 +130,10 @@ class WindowStore:
         """The connection; the file and its tables are made on first use (or `StoreUnavailable`)."""
         if self._connection is not None:
             return self._connection
+        if self._closed:
+            raise StoreUnavailable(
+                f"the maintenance windows in {self.path!r} are closed (the exporter is stopping)"
+            )
         try:
             connection = sqlite3.connect(
                 self.path, timeout=5.0, isolation_level=None, check_same_thread=False
