@@ -184,8 +184,9 @@ class Exporter:
         """Stop everything in order; False when a part failed to stop (the others are stopped all the same).
 
         The order: no worker is restarted, the HTTP server stops answering, the pushes end, the maintenance
-        schedule closes, the fleet leaves its transports (and its workers end), and the event history
-        writes what is queued and closes the database last (checkpointed: no write-ahead log is left).
+        schedule stops, the fleet leaves its transports (and its workers end), and the event history
+        writes what is queued and closes its connection, then the maintenance windows' (the last to close
+        the shared SQLite file checkpoints it: no write-ahead log is left).
         """
         steps: list[tuple[str, Callable[[], None]]] = []
         if isinstance(self.fleet, PooledFleet):
@@ -204,6 +205,7 @@ class Exporter:
         ]
         if self.history is not None:
             steps.append(("event history", self.history.stop))
+        steps.append(("maintenance windows' database", self.maintenance.close))
         clean = True
         for what, step in steps:
             try:

@@ -8,8 +8,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from overseer.inventory.registry import RobotRegistry
+from overseer.maintenance.store import StoreUnavailable, WindowStore
 from overseer.model import RememberedRobot
+from overseer.model.maintenance import RobotSelector
 from testbed.in_process import in_process_exporter, publish
 
 
@@ -35,3 +39,16 @@ def test_a_registry_closed_opens_its_file_no_more(tmp_path: Path) -> None:
     registry.close()
     assert not registry.save([robot])  # a save that was under way at stop
     assert leftovers(database) == []
+
+
+def test_a_closed_window_store_refuses_rather_than_say_there_is_no_window(tmp_path: Path) -> None:
+    """A scrape on a kept-alive connection while the exporter stops must not see maintenance end."""
+    store = WindowStore(str(tmp_path / "events.db"))
+    store.add(RobotSelector("robot1"), 0.0, 4e9, "swap the lidar", "ops", 0.0)
+    assert len(store.windows(1.0)) == 1
+    store.close()
+    with pytest.raises(StoreUnavailable, match="closed"):
+        store.windows(1.0)
+    with pytest.raises(StoreUnavailable, match="closed"):
+        store.effects("icinga2")
+    assert leftovers(tmp_path / "events.db") == []

@@ -83,10 +83,13 @@ class MaintenanceSchedule:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop telling, and close the windows' database."""
+        """Stop telling."""
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
+
+    def close(self) -> None:
+        """Close the windows' database: the last thing the exporter does, once nothing else asks."""
         if self.store is not None:
             self.store.close()
 

@@ -80,6 +80,7 @@ class WindowStore:
         """The one-off windows that end (or ended) after `ending_after`, oldest first."""
         with self._lock:
             if self._connection is None:
+                self._refuse_when_closed()
                 return []  # no window was ever made here
             rows = self._connection.execute(
                 "SELECT id, robots, starts_at, ends_at, comment, author, ended_at FROM maintenance_windows "
@@ -95,6 +96,7 @@ class WindowStore:
         """(window key, subject) → reference of every effect kept for `target`."""
         with self._lock:
             if self._connection is None:
+                self._refuse_when_closed()
                 return {}
             rows = self._connection.execute(
                 "SELECT window, subject, reference FROM maintenance_effects WHERE target = ?", (target,)
@@ -126,14 +128,18 @@ class WindowStore:
                 self._connection.close()
                 self._connection = None
 
-    def _connect(self) -> sqlite3.Connection:
-        """The connection; the file and its tables are made on first use (or `StoreUnavailable`)."""
-        if self._connection is not None:
-            return self._connection
+    def _refuse_when_closed(self) -> None:
+        """After `close`, saying "no window" would be a lie (maintenance-gated alerts would fire)."""
         if self._closed:
             raise StoreUnavailable(
                 f"the maintenance windows in {self.path!r} are closed (the exporter is stopping)"
             )
+
+    def _connect(self) -> sqlite3.Connection:
+        """The connection; the file and its tables are made on first use (or `StoreUnavailable`)."""
+        if self._connection is not None:
+            return self._connection
+        self._refuse_when_closed()
         try:
             connection = sqlite3.connect(
                 self.path, timeout=5.0, isolation_level=None, check_same_thread=False

@@ -300,7 +300,6 @@ class DdsSource:
         if topic_name in session.best_effort_topics:
             return
         session.best_effort_topics.add(topic_name)
-        log.info("reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id)
         reader = session.readers.pop(topic_name, None)
         if reader is not None:
             reader.__del__()  # `_subscribe` creates its best-effort successor
@@ -322,7 +321,12 @@ class DdsSource:
         topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
         listener = Listener(on_data_available=self._on_data_callback(session, topic_name))  # type: ignore[no-untyped-call]
         session.readers[topic_name] = DataReader(session.subscriber, topic, qos=qos, listener=listener)
-        log.info("reading %s on domain %d", topic_name, session.config.id)
+        if qos is BEST_EFFORT_QOS:
+            log.info(
+                "reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id
+            )
+        else:
+            log.info("reading %s on domain %d", topic_name, session.config.id)
 
     def _on_data_callback(self, session: _DomainSession, topic_name: str) -> Any:
         writers = session.writers

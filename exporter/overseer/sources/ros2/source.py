@@ -127,11 +127,13 @@ class Ros2Source:
 
     def start(self) -> None:
         """Join the graph, take messages as they arrive, and look for robots every period from now on."""
-        poll, self._stopping = select.epoll(), _new_eventfd()
-        poll.register(self._stopping, select.EPOLLIN)
-        self._poll = poll
         self._ros = ros_node.acquire(self._node_name, self._config.domain)
-        self._taker = threading.Thread(target=self._take_loop, args=(poll,), name="ros2-take", daemon=True)
+        poll, stopping = select.epoll(), _new_eventfd()
+        poll.register(stopping, select.EPOLLIN)
+        self._poll, self._stopping = poll, stopping
+        self._taker = threading.Thread(
+            target=self._take_loop, args=(poll, stopping), name="ros2-take", daemon=True
+        )
         self._taker.start()
         self._ros.call(self._discover)
         self._task = self._ros.every(DISCOVERY_PERIOD_SECONDS, self._discover)
@@ -327,12 +329,12 @@ class Ros2Source:
                 self._model.publisher_left(robot)
                 log.info("robot %s: its last diagnostics publisher left the graph", robot)
 
-    def _take_loop(self, poll: select.epoll) -> None:
+    def _take_loop(self, poll: select.epoll, stopping: int) -> None:
         taker = RawTaker()
         try:
             while True:
                 for wake, _ in poll.poll():  # the GIL is released while it waits
-                    if wake == self._stopping:
+                    if wake == stopping:
                         return
                     with self._taking:
                         topic = self._woken.get(wake)
