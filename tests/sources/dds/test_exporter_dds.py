@@ -87,7 +87,7 @@ def test_component_goes_stale_after_stale_after(tmp_path: Path, dds_domain: int)
     with (
         running_exporter(tmp_path, dds_domain, *FAST) as exporter,
         running_simulator(
-            tmp_path, dds_domain, "--robots=1", "--rate=4", "--event=3:robot1:/Temp/Sensor1:silence"
+            tmp_path, dds_domain, "--robots=1", "--rate=4", "--event=6:robot1:/Temp/Sensor1:silence"
         ),
     ):
         wait_for(lambda: robot_with(exporter, "robot1", 15), 30, message="robot1")
@@ -109,7 +109,7 @@ def test_component_goes_stale_after_stale_after(tmp_path: Path, dds_domain: int)
 def test_stopped_robot_goes_down_then_its_series_expire(tmp_path: Path, dds_domain: int) -> None:
     with (
         running_exporter(tmp_path, dds_domain, *FAST, "--fleet.expire-after=6s") as exporter,
-        running_simulator(tmp_path, dds_domain, "--robots=2", "--rate=4", "--event=3:robot2:stop"),
+        running_simulator(tmp_path, dds_domain, "--robots=2", "--rate=4", "--event=6:robot2:stop"),
     ):
         wait_for(lambda: robot_with(exporter, "robot2", 15), 30, message="robot2")
         robot = wait_for(
@@ -143,7 +143,7 @@ def test_level_change_on_the_robot_reaches_metrics(tmp_path: Path, dds_domain: i
     with (
         running_exporter(tmp_path, dds_domain) as exporter,
         running_simulator(
-            tmp_path, dds_domain, "--robots=1", "--rate=4", "--event=3:robot1:/Power/Robot Battery:ERROR"
+            tmp_path, dds_domain, "--robots=1", "--rate=4", "--event=6:robot1:/Power/Robot Battery:ERROR"
         ),
     ):
         wait_for(
