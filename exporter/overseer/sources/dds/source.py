@@ -321,12 +321,8 @@ class DdsSource:
         topic = Topic(session.participant, topic_name, DiagnosticArray, qos=ROS_DEFAULT_QOS)
         listener = Listener(on_data_available=self._on_data_callback(session, topic_name))  # type: ignore[no-untyped-call]
         session.readers[topic_name] = DataReader(session.subscriber, topic, qos=qos, listener=listener)
-        if qos is BEST_EFFORT_QOS:
-            log.info(
-                "reading %s on domain %d best-effort, as a writer of it is", topic_name, session.config.id
-            )
-        else:
-            log.info("reading %s on domain %d", topic_name, session.config.id)
+        how = " best-effort, as a writer of it is" if qos is BEST_EFFORT_QOS else ""
+        log.info("reading %s on domain %d%s", topic_name, session.config.id, how)
 
     def _on_data_callback(self, session: _DomainSession, topic_name: str) -> Any:
         writers = session.writers
