@@ -100,6 +100,40 @@ def test_a_first_message_makes_its_components_appear_and_its_robot_up() -> None:
     )
 
 
+class JitteryWallClock:
+    """A wall clock read the given microseconds after the monotonic one, each read in turn."""
+
+    def __init__(self, monotonic: Clock, *late_by_microseconds: float) -> None:
+        """Follow `monotonic` 1,000 s ahead, late by each of `late_by_microseconds` in turn, then by 0."""
+        self._monotonic = monotonic
+        self._late = list(late_by_microseconds)
+
+    def __call__(self) -> float:
+        """The time, as read this once."""
+        late = self._late.pop(0) if self._late else 0.0
+        return self._monotonic.now + 1_000.0 + late * 1e-6
+
+
+def test_a_robot_up_is_dated_as_the_message_that_brought_it_up_however_the_clocks_were_read() -> None:
+    # Under load the wall clock may be read a few microseconds after the monotonic one for one message
+    # and not for the next: the robot_up event, dated from the run's monotonic start, must not come
+    # before the `appeared` of the message that began the run (events are listed by time).
+    monotonic = Clock()
+    limits = FleetLimits(stale_after=STALE_AFTER, robot_timeout=ROBOT_TIMEOUT, expire_after=EXPIRE_AFTER)
+    model = FleetModel(limits, clock=monotonic, wall_clock=JitteryWallClock(monotonic, 40.0))
+    sent: list[Event] = []
+    detector = TransitionDetector(limits, sent.extend)
+    model.set_level_listener(detector.on_level_changes)
+    array = DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "drive: Motor", "spinning", "m1", ()),))
+    for _ in range(3):
+        model.apply("robot_b", array, "dds")
+        monotonic.now += 1.0
+    detector.check(model.told_snapshot())
+    appeared, up = sent
+    assert (appeared.kind, up.kind) == ("appeared", "robot_up")
+    assert up.time == appeared.time == monotonic.now - 3.0 + 1_000.0 + 40e-6
+
+
 def test_a_level_change_is_one_event_with_its_message_values_and_exact_time() -> None:
     fleet = started_fleet()
     fleet.advance(0.37)

@@ -44,6 +44,7 @@ from overseer.model.state import (
     RobotState,
     feed_stale_after,
     robot_timeout,
+    steady_wall_offset,
     up_since,
 )
 
@@ -178,7 +179,7 @@ class FleetModel:
                 (*feeds[:index], current, *feeds[index + 1 :]),
                 state.missing,
                 state.left_at,
-                wall - now,
+                steady_wall_offset(state.wall_offset, now, wall),
                 up_since(self.limits, state, now),
                 state.listing,
             )
@@ -209,6 +210,8 @@ class FleetModel:
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
                     return Applied(False, None)
                 state = RobotState(robot, transport, None, MappingProxyType({}), now)
+            offset = steady_wall_offset(state.wall_offset, now, wall)
+            wall = now + offset  # this message's events are dated as its robot's other times are
             feeds = list(state.feeds)
             position = _feed_index(state.feeds, feed_name)
             if position is None and len(feeds) >= limits.max_feeds_per_robot:
@@ -239,7 +242,7 @@ class FleetModel:
                 merge.other_feeds(feeds),
                 merge.missing_set(),
                 state.left_at,
-                wall - now,
+                offset,
                 up_since(limits, state, now),
                 state.listing,
             )
@@ -280,6 +283,8 @@ class FleetModel:
             index = _feed_index(feeds, feed)
             if index is None:
                 return None
+            offset = steady_wall_offset(state.wall_offset, now, wall)
+            wall = now + offset
             old = feeds[index]
             latest = old.latest
             if old.revision != revision or None in latest:
@@ -330,7 +335,7 @@ class FleetModel:
                 (*feeds[:index], current_feed, *feeds[index + 1 :]),
                 state.missing,
                 state.left_at,
-                wall - now,
+                offset,
                 up_since(self.limits, state, now),
                 state.listing,
             )

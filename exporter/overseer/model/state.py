@@ -23,6 +23,7 @@ ComponentKey = tuple[str, str]
 UNREPORTED = "expected, not reported"  # what the stand-in of an expected component no one reported says
 STALE_PERIODS = 3.0  # a component is STALE after this many of its producer's periods without an update
 PERIOD_SAMPLES = 5  # intervals a feed's period is the median of
+_OFFSET_JITTER = 0.001  # seconds: a change of the clocks' offset smaller than this is how they were read
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,17 @@ class RobotState:
             if feed.name == name:
                 return feed
         return None
+
+
+def steady_wall_offset(previous: float, now: float, wall: float) -> float:
+    """Wall clock minus monotonic clock read as `now` and `wall`, or `previous` within a millisecond of it.
+
+    The two clocks are read one after the other, a few hundred nanoseconds (or a preemption) apart: an
+    offset that moved by that much would date one message's events differently (a robot's `robot_up`
+    before the `appeared` of the very message that brought it up). A step of the wall clock still counts.
+    """
+    offset = wall - now
+    return previous if -_OFFSET_JITTER < offset - previous < _OFFSET_JITTER else offset
 
 
 def up_since(limits: FleetLimits, state: RobotState, now: float) -> float:
