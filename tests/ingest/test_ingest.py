@@ -71,6 +71,18 @@ def test_republished_payload_only_refreshes_and_changed_one_is_applied() -> None
     assert snapshot.robots[0].components[("/a", "")].level == 2
 
 
+def test_a_payload_equal_but_for_its_encapsulation_header_is_read_again_not_taken_as_republished() -> None:
+    model = FleetModel()
+    ingest = PayloadIngest(model, "r1", "dds", "t", cdr.WIRE_FORMAT)
+    payload = cdr_payload(1, DiagnosticStatus(1, "/a", "m", ""))
+    ingest(payload)
+    with pytest.raises(DecodeError):
+        ingest(b"\xff\xff" + payload[2:])  # no representation this reader knows
+    snapshot = model.snapshot()
+    assert snapshot.message_counts[("dds", "decode_error")] == 1
+    assert snapshot.message_counts[("dds", "received")] == 1
+
+
 def test_only_the_statuses_that_changed_are_decoded() -> None:
     model = FleetModel()
     wire = CountingWire(cdr.WIRE_FORMAT)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 from array import array
-from hashlib import blake2b
 from itertools import pairwise
 from typing import NamedTuple
 
@@ -18,7 +17,7 @@ class _Layout(NamedTuple):
     """Where the statuses of the last payload applied lay, and a hash of each."""
 
     revision: int  # the feed's revision that payload made
-    fingerprint: bytes  # 128-bit BLAKE2 digest of the payload but its stamp
+    fingerprint: int  # hash of the bytes after the stamp
     prefix: bytes  # the bytes before the stamp (the encapsulation header)
     head_hash: int  # hash of the bytes between the stamp and the first status
     bounds: array[int]  # where each status began, then where the last one ended
@@ -30,11 +29,12 @@ class PayloadIngest:
     """Feeds one feed of a robot (a diagnostics topic, or one publisher of it) into the model.
 
     Aggregators republish the same array every second: a payload equal to the last one applied but for
-    its stamp only refreshes the robot. Most other arrays differ from the last one in a few statuses (a
-    voltage, a temperature): a status whose bytes hash as they did, at an offset that keeps the format's
-    alignment, decodes as it did, so only the others are decoded and applied. Hashes, not the payload,
-    are kept: the payload would cost about 90 bytes a component, a tenth of the memory budget. The
-    hashes are Python's keyed 64-bit SipHash (seeded per process), so no robot can aim a collision.
+    its stamp (the same bytes before it, the same hash of those after it) only refreshes the robot.
+    Most other arrays differ from the last one in a few statuses (a voltage, a temperature): a status
+    whose bytes hash as they did, at an offset that keeps the format's alignment, decodes as it did, so
+    only the others are decoded and applied. Hashes, not the payload, are kept: the payload would cost
+    about 90 bytes a component, a tenth of the memory budget. The hashes are Python's keyed 64-bit
+    SipHash (seeded per process), so no robot can aim a collision.
     With the compiled decoder, the comparison and the decoding of what changed run in C
     (`scan.scan_compiled`, the same hashes); `scan.scan_python` is the pure-Python reference.
     """
@@ -61,15 +61,15 @@ class PayloadIngest:
     def __call__(self, payload: bytes) -> None:
         """Apply one payload; DecodeError (counted as decode_error) when it is not a DiagnosticArray."""
         start, stop = self._wire.stamp
-        digest = blake2b(payload[:start], digest_size=16)
-        digest.update(payload[stop:])
-        fingerprint = digest.digest()
+        fingerprint = hash(payload[stop:])
         with self._lock:
             layout, self._layout = self._layout, None
             try:
                 if layout is not None:
-                    if fingerprint == layout.fingerprint and self._model.touch(
-                        self._robot, self._transport, self._feed, layout.revision
+                    if (
+                        fingerprint == layout.fingerprint
+                        and payload[:start] == layout.prefix
+                        and self._model.touch(self._robot, self._transport, self._feed, layout.revision)
                     ):
                         self._layout = layout
                         return
@@ -80,7 +80,7 @@ class PayloadIngest:
                 self._model.count_message(self._transport, "decode_error")
                 raise
 
-    def _apply_whole(self, payload: bytes, fingerprint: bytes) -> _Layout | None:
+    def _apply_whole(self, payload: bytes, fingerprint: int) -> _Layout | None:
         wire = self._wire
         laid_out = decode_laid_out(wire, payload)
         applied = self._model.apply_array(
@@ -100,7 +100,7 @@ class PayloadIngest:
             laid_out.read_status,
         )
 
-    def _apply_changes(self, payload: bytes, fingerprint: bytes, layout: _Layout) -> _Layout | None:
+    def _apply_changes(self, payload: bytes, fingerprint: int, layout: _Layout) -> _Layout | None:
         """Decode and apply only the statuses that changed; None when the payload must go whole."""
         wire = self._wire
         start, stop = wire.stamp
