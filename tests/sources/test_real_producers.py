@@ -136,7 +136,7 @@ def test_a_node_restarted_while_the_exporter_listens_comes_back_as_it_was(
         with updaters(tmp_path, dds_domain, node):
             wait_for(lambda: (exporter.robot("robot_r") or {}).get("up"), 30, message="up again")
             seen = watch(exporter, "robot_r", 7)
-        history = events(exporter, "robot_r")
+            history = events(exporter, "robot_r")  # before this node stops: that is one more down
     # Its start-up status may say OK for a moment: one component, its hardware_id kept, never STALE.
     assert all(set(state) == {"driver: Battery"} for state in seen), seen
     assert all(
