@@ -39,6 +39,7 @@ from overseer.config.zenoh import ZenohConfig
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.sources.paced_drain import drain_paced
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh.keys import (
@@ -204,13 +205,23 @@ class ZenohSource:
         return None
 
     def _drain(self, channel: Any) -> None:
-        """Hand every sample of one subscription's channel to `_on_data` until it is closed."""
-        while True:
+        """Hand every sample of one subscription's channel to `_on_data`, in batches, until it is closed."""
+
+        def wait() -> zenoh.Sample | None:
             try:
-                sample = channel.recv()
+                sample: zenoh.Sample = channel.recv()
             except zenoh.ZError:  # closed: the subscriber was undeclared
-                return
-            self._on_data(sample)
+                return None
+            return sample
+
+        def poll() -> zenoh.Sample | None:
+            try:
+                sample: zenoh.Sample | None = channel.try_recv()
+            except zenoh.ZError:
+                return None
+            return sample
+
+        drain_paced(wait, poll, self._on_data, self._stop.is_set)
 
     def _queued(self) -> Callback[zenoh.Sample]:
         """A handler putting samples on the one queue `_drain_queue` reads, from Zenoh's own thread.
@@ -227,9 +238,15 @@ class ZenohSource:
             self._model.count_message(TRANSPORT, "dropped")
 
     def _drain_queue(self) -> None:
-        """Hand every queued sample to `_on_data` until `stop`."""
-        while (sample := self._samples.get()) is not None:
-            self._on_data(sample)
+        """Hand every queued sample to `_on_data`, in batches, until `stop`."""
+
+        def poll() -> zenoh.Sample | None:
+            try:
+                return self._samples.get_nowait()
+            except queue.Empty:
+                return None
+
+        drain_paced(self._samples.get, poll, self._on_data, self._stop.is_set)
 
     def _follow(self, topic: DiagnosticsKey, robot: str) -> None:
         """Ask for a subscription to one namespaced topic of a robot this worker owns."""
