@@ -109,6 +109,8 @@ class ZenohSource:
         self._lock = threading.Lock()
         # (robot, kind, publisher GID or b"") → its feed's ingest, None when not followed
         self._ingests: dict[tuple[str, str, bytes], PayloadIngest | None] = {}
+        # robot → its feeds in `_ingests`: a new feed looks at its robot's, not at the whole fleet's
+        self._feeds_of: dict[str, list[tuple[str, str, bytes]]] = {}
         # Every worker hears every robot's key: the others' are known by key, so they cost a set lookup.
         self._foreign: set[str] = set()
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
@@ -353,21 +355,27 @@ class ZenohSource:
         with self._lock:
             if feed in self._ingests:
                 return self._ingests[feed]
-            if parsed.kind == RAW and any(key[:2] == (robot, AGGREGATED) for key in self._ingests):
-                self._ingests[feed] = None  # a robot publishing both is read from diagnostics_agg only
+            feeds = self._feeds_of.get(robot, [])
+            if parsed.kind == RAW and any(kind == AGGREGATED for _, kind, _ in feeds):
+                self._add_feed(feed, None)  # a robot publishing both is read from diagnostics_agg only
                 return None
             if not self._model.register(robot, TRANSPORT):
                 self._model.count_message(TRANSPORT, "dropped")
                 return None
             if parsed.kind == AGGREGATED:
-                for key in [key for key in self._ingests if key[:2] == (robot, RAW)]:
+                for key in [key for key in feeds if key[1] == RAW]:
                     self._ingests[key] = None
                     self._model.forget_topic(robot, parsed.topic[: -len(AGGREGATED)] + RAW)
             name = f"{parsed.topic}@{gid.hex()}" if gid else parsed.topic
             ingest = PayloadIngest(self._model, robot, TRANSPORT, parsed.topic, cdr.WIRE_FORMAT, name)
-            self._ingests[feed] = ingest
+            self._add_feed(feed, ingest)
             log.info("following robot %s over Zenoh (%s, %s)", robot, parsed.topic, parsed.key_format)
             return ingest
+
+    def _add_feed(self, feed: tuple[str, str, bytes], ingest: PayloadIngest | None) -> None:
+        """Remember a feed's ingest (None: not followed), under `_lock`."""
+        self._ingests[feed] = ingest
+        self._feeds_of.setdefault(feed[0], []).append(feed)
 
     def _on_token(self, sample: zenoh.Sample) -> None:
         try:
@@ -418,8 +426,9 @@ class ZenohSource:
         """Forget the ingests, tokens and publishers of robots the model has forgotten (expired)."""
         known = {robot.name for robot in self._model.snapshot().robots}
         with self._lock:
-            for key in [key for key in self._ingests if key[0] not in known]:
-                del self._ingests[key]
+            for robot in [robot for robot in self._feeds_of if robot not in known]:
+                for feed in self._feeds_of.pop(robot):
+                    del self._ingests[feed]
             for robot in [robot for robot in self._tokens if robot not in known]:
                 del self._tokens[robot]
             gone = [key for key, (robot, _) in self._followed.items() if robot not in known]
