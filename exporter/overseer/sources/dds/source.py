@@ -23,7 +23,6 @@ import logging
 import os
 import threading
 import time
-from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,7 +121,7 @@ class DdsSource:
         self._namespace_depth = namespace_depth
         self._sessions: list[_DomainSession] = []
         self._lock = threading.Lock()  # the writers' pending samples and ingests, between listener threads
-        self._robot_writers: Counter[str] = Counter()  # robot → its live writers, across domains
+        self._robot_writers: dict[str, list[_Writer]] = {}  # robot → its live writers, across domains
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -246,7 +245,7 @@ class DdsSource:
     def _adopt(self, writer: _Writer, robot: str) -> None:
         """Follow `writer` as a feed of `robot` (when this source follows the robot), its pending first."""
         writer.robot = robot
-        self._robot_writers[robot] += 1
+        self._robot_writers.setdefault(robot, []).append(writer)
         if not self._shard.owns(robot):
             writer.ignored = True
         elif writer.kind == RAW and robot in self._aggregated and AGGREGATED in self._config.topics:
@@ -275,11 +274,10 @@ class DdsSource:
 
     def _ignore_raw(self, robot: str) -> None:
         """Leave a robot's raw diagnostics writers once it has an aggregator: forget what they said."""
-        for session in self._sessions:
-            for writer in session.writers.values():
-                if writer.robot == robot and writer.kind == RAW and not writer.ignored:
-                    writer.ignored, writer.ingest = True, None
-                    self._model.forget_topic(robot, writer.topic)
+        for writer in self._robot_writers.get(robot, []):
+            if writer.kind == RAW and not writer.ignored:
+                writer.ignored, writer.ingest = True, None
+                self._model.forget_topic(robot, writer.topic)
 
     def _writer_left(self, session: _DomainSession, handle: int) -> None:
         """A writer left: its robot is down at once when no writer of its diagnostics is left."""
@@ -288,9 +286,11 @@ class DdsSource:
         if writer is None or writer.robot is None:
             return
         robot = writer.robot
-        self._robot_writers[robot] -= 1
-        if self._robot_writers[robot] <= 0:
-            del self._robot_writers[robot]
+        writers = [other for other in self._robot_writers.get(robot, []) if other is not writer]
+        if writers:
+            self._robot_writers[robot] = writers
+        else:
+            self._robot_writers.pop(robot, None)
             if self._shard.owns(robot):
                 self._model.publisher_left(robot)
                 log.info("robot %s: its last diagnostics writer left", robot)
