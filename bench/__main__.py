@@ -27,6 +27,7 @@ BENCHMARKS = (
     "bench.bench_icinga2",
     "bench.bench_alert_rules",
     "bench.bench_inventory",
+    "bench.bench_first_look",
     "bench.bench_scale",
 )
 
