@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Any, Literal, NamedTuple, get_args
 
 from overseer.levels import Level
 
@@ -24,12 +23,13 @@ EVENT_KINDS: tuple[EventKind, ...] = get_args(EventKind)
 _LEVEL_NAMES = {level: level.name for level in Level}
 
 
-@dataclass(frozen=True, slots=True)
-class Event:
+class Event(NamedTuple):
     """A transition: a component's level, a robot going down or up, a component appearing, going, expiring.
 
     `component` and `hardware_id` are None for events of a whole robot; `old_level` is None when nothing
     was known before (a first report), `new_level` None when nothing is known after (missing, expired).
+    A named tuple, not a frozen dataclass: a robot's first message makes one a component, and a frozen
+    dataclass took 3 µs to build against 0.4 µs.
     """
 
     time: float
