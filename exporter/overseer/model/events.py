@@ -29,7 +29,7 @@ class Event(NamedTuple):
     `component` and `hardware_id` are None for events of a whole robot; `old_level` is None when nothing
     was known before (a first report), `new_level` None when nothing is known after (missing, expired).
     A named tuple, not a frozen dataclass: a robot's first message makes one a component, and a frozen
-    dataclass took 3 µs to build against 0.4 µs.
+    dataclass took 3 µs to build against 0.6 µs.
     """
 
     time: float
