@@ -5,27 +5,47 @@ one Python Zenoh router, `overseer run --dds.disabled --zenoh.connect ROUTER --i
 the load generator (`bench.loadgen`) publishing N robots x 50 components at 1 Hz as rmw_zenoh does,
 with the realistic profile (1 % of statuses changing a second, 2 % of robots in trouble) unless
 `--profile live`. The generator waits until the exporter's subscriptions match every robot, so the
-ramp-up (every robot's first array) is inside the window. Lost updates = messages the generator
-published minus messages the exporter counted as received; CPU is the exporter's processes' (main and
+ramp-up (every robot's first array) is inside the window. Beside the fleet, one more robot
+(`bench.change_probe`) changes a value every second: the time each change takes to reach the exporter's
+model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
+the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
+Lost updates = messages the generator published minus messages the exporter counted as received (the
+probe's taken out); CPU is the exporter's processes' (main and
 workers) over the window; the generator's own CPU per 1,000 robots is printed beside every figure.
+
+With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
+the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
+same Prometheus, a static server answering the exporter's own bytes: Prometheus's own
+`scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed. The lost
+updates then cover the whole run, Prometheus included.
 """
 
 from __future__ import annotations
 
 import argparse
 import re
+import statistics
 import tempfile
 import time
 import urllib.request
+from dataclasses import replace
 from pathlib import Path
 
+from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
+from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, static_server
+from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.loadgen import running_loadgen
 from testbed.processes import running_exporter
+from testbed.prometheus import running_prometheus
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
 COMPONENTS = 50
 SETTLE_SECONDS = 4.0  # after the generator stops, for the last samples to be counted
+FLOOR_RATIO = 1.3  # Prometheus's scrape of the exporter against its scrape of the same bytes served static
+CHECK_RUNS = 10
+CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the fleet publishes
+PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
 
 
 def received(url: str) -> float:
@@ -45,9 +65,83 @@ def scrape(url: str) -> tuple[float, int]:
     return time.perf_counter() - started, size
 
 
-def run(robots: int, workers: int, profile: str, seconds: float) -> list[Row]:
+def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
+    """Prometheus scraping the exporter and a static copy of its bytes for `seconds`: its own durations."""
+    body, content_type = fetch(exporter_url + "/metrics", PROMETHEUS_ACCEPT)
+    with static_server(body, content_type) as floor:
+        jobs = [("overseer", exporter_url.removeprefix("http://")), ("floor", floor)]
+        config = {
+            "global": {"scrape_interval": f"{interval}s", "scrape_timeout": f"{interval}s"},
+            "scrape_configs": [{"job_name": job, "static_configs": [{"targets": [t]}]} for job, t in jobs],
+        }
+        with running_prometheus(directory, config) as prometheus:
+            time.sleep(seconds)
+            ours = scrape_durations(prometheus, "overseer", seconds)
+            floors = scrape_durations(prometheus, "floor", seconds)
+            window = f"{int(seconds)}s"
+            attempts = prometheus.query(f'count_over_time(up{{job="overseer"}}[{window}])')
+            succeeded = prometheus.query(f'sum_over_time(up{{job="overseer"}}[{window}])')
+            samples = prometheus.query('scrape_samples_scraped{job="overseer"}')
+            prometheus_cpu = cpu_seconds(prometheus.process.pid) / seconds * 100
+            prometheus_memory = tree_resident_bytes(prometheus.process.pid)
+    failed = float(attempts[0]["value"][1]) - float(succeeded[0]["value"][1]) if attempts else 0.0
+    ours_median = statistics.median(ours) if ours else float("nan")
+    floor_median = statistics.median(floors) if floors else float("nan")
+    ratio = ours_median / floor_median
+    return [
+        Row(
+            "scale",
+            "Prometheus: samples a scrape",
+            float(samples[0]["value"][1]) if samples else 0,
+            "samples",
+        ),
+        Row("scale", "Prometheus: exposition (its Accept, plain)", len(body) / 1e6, "MB"),
+        Row("scale", "Prometheus: scrape_duration_seconds, exporter (median)", ours_median, "s"),
+        Row("scale", "Prometheus: scrape_duration_seconds, exporter (max)", max(ours, default=0.0), "s"),
+        Row("scale", "Prometheus: scrape_duration_seconds, floor (median)", floor_median, "s"),
+        Row("scale", "Prometheus: exporter / floor", ratio, "x", f"<= {FLOOR_RATIO}", ratio <= FLOOR_RATIO),
+        Row("scale", "Prometheus: scrapes measured, exporter / floor", len(ours), f"/ {len(floors)}"),
+        Row("scale", "Prometheus: exporter scrapes failed", failed, "scrapes", "0", failed == 0),
+        Row("scale", "Prometheus: its CPU since it started", prometheus_cpu, "% of a core"),
+        Row("scale", "Prometheus: its resident memory", prometheus_memory / 1e6, "MB"),
+    ]
+
+
+def check_rows(url: str, robot: str, runs: int = CHECK_RUNS) -> list[Row]:
+    """check_ros_diagnostics of one robot against the exporter now, beside `python -c pass` (target <= 2x)."""
+    commands = {
+        "python": [shebang_interpreter(CHECK), "-c", "pass"],
+        "check": [str(CHECK), "--url", url, "-r", robot],
+    }
+    with tempfile.TemporaryDirectory(prefix="bench-pycache-") as cache:
+        times = wall_times(commands, runs, cached_environment(cache))
+    check, python = statistics.median(times["check"]), statistics.median(times["python"])
+    return [
+        Row("scale", f"check_ros_diagnostics -r {robot}, median", check * 1000, "ms"),
+        Row(
+            "scale",
+            "check_ros_diagnostics / python -c pass",
+            check / python,
+            "x",
+            f"<= {TARGET_RATIO:g}",
+            check / python <= TARGET_RATIO,
+        ),
+    ]
+
+
+def run(
+    robots: int,
+    workers: int,
+    profile: str,
+    seconds: float,
+    prometheus_seconds: float = 0,
+    interval: int = 30,
+    exporter_options: tuple[str, ...] = (),
+) -> list[Row]:
     """Publish `robots` x 50 at 1 Hz for `seconds` into an exporter with `workers` ingest workers."""
     label = f"{robots} robots x {COMPONENTS}, {profile}, {workers} worker{'s' if workers > 1 else ''}"
+    label += "".join(f", {option}" for option in exporter_options)
+    publishing = seconds + (prometheus_seconds + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0)
     with (
         tempfile.TemporaryDirectory() as tmp,
         running_router_process(Path(tmp)) as (port, router),
@@ -58,6 +152,7 @@ def run(robots: int, workers: int, profile: str, seconds: float) -> list[Row]:
             f"--ingest.workers={workers}",
             f"--fleet.max-robots={2 * robots}",  # the cap is shared out by hash: headroom, not a limit
             "--log.level=warning",
+            *exporter_options,
         ) as exporter,
     ):
         pid = exporter.process.pid
@@ -69,19 +164,30 @@ def run(robots: int, workers: int, profile: str, seconds: float) -> list[Row]:
                 f"--zenoh.connect={endpoint(port)}",
                 "--zenoh.listen=tcp/127.0.0.1:0",
                 f"--wait-for-subscribers={max(60, robots / 50)}",
-                f"--duration={seconds}",
+                f"--duration={publishing}",
             ],
             Path(tmp),
         ) as loadgen:
             loadgen.wait_ready(max(60, robots / 50))
             started, started_cpu = time.monotonic(), tree_cpu_seconds(pid)
             router_cpu = cpu_seconds(router.process.pid)
-            figures = loadgen.figures(seconds + 600)
+            prometheus_rows: list[Row] = []
+            with ChangeProbe(exporter.url, endpoint(port), COMPONENTS) as probe:
+                time.sleep(max(0.0, seconds - CHECK_SECONDS))
+                checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
+                if prometheus_seconds:
+                    time.sleep(max(0.0, started + seconds - time.monotonic()))
+                    prometheus_rows = scrape_against_floor(
+                        exporter.url, Path(tmp), prometheus_seconds, interval
+                    )
+                    figures = loadgen.finish()
+                else:
+                    figures = loadgen.figures(seconds + 600)
         time.sleep(SETTLE_SECONDS)
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
         router_cpu = cpu_seconds(router.process.pid) - router_cpu
-        got = received(exporter.url)
+        got = received(exporter.url) - probe.published
         rss = tree_resident_bytes(pid)
         scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
     lost = max(0.0, figures.published - got)
@@ -95,7 +201,8 @@ def run(robots: int, workers: int, profile: str, seconds: float) -> list[Row]:
         Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core"),
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
-    ]
+        *probe.rows(label),
+    ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
 
 
 def main() -> None:
@@ -105,11 +212,29 @@ def main() -> None:
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     parser.add_argument("--profile", default="realistic", choices=["realistic", "live"])
     parser.add_argument("--seconds", type=float, default=60)
+    parser.add_argument(
+        "--prometheus-seconds",
+        type=float,
+        default=0,
+        help="Prometheus scrapes it after",
+    )
+    parser.add_argument("--scrape-interval", type=int, default=30, help="Prometheus's (s)")
+    parser.add_argument(
+        "--exporter-option", action="append", default=[], help="passed to `overseer run` (repeat for several)"
+    )
     options = parser.parse_args()
     rows: list[Row] = []
     for robots in [int(size) for size in options.robots.split(",")]:
         for workers in [int(count) for count in options.workers.split(",")]:
-            rows += run(robots, workers, options.profile, options.seconds)
+            rows += run(
+                robots,
+                workers,
+                options.profile,
+                options.seconds,
+                options.prometheus_seconds,
+                options.scrape_interval,
+                tuple(options.exporter_option),
+            )
     emit(rows)
 
 

@@ -115,6 +115,13 @@ class _StaticExposition(http.server.BaseHTTPRequestHandler):
         return
 
 
+class _QuietServer(http.server.ThreadingHTTPServer):
+    """A threading server that does not print a traceback when a scraper hangs up (as Prometheus does)."""
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        return
+
+
 @contextlib.contextmanager
 def static_server(body: bytes, content_type: str) -> Iterator[str]:
     """Serve `body` at every path on loopback; yields the host:port."""
@@ -123,7 +130,7 @@ def static_server(body: bytes, content_type: str) -> Iterator[str]:
         (_StaticExposition,),
         {"body": body, "compressed": gzip.compress(body, compresslevel=1), "content_type": content_type},
     )
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", free_port()), handler)
+    server = _QuietServer(("127.0.0.1", free_port()), handler)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         yield f"127.0.0.1:{server.server_address[1]}"

@@ -102,12 +102,12 @@ def build_template(
     for index, status in enumerate(statuses):
         if status.values:
             key, text = status.values[0]
-            offset = _value_offset(payload, bounds[index], bounds[index + 1], key, text)
+            offset = value_offset(payload, bounds[index], bounds[index + 1], key, text)
             slots.append(Slot(index, offset, value_variants(text)))
     return ArrayTemplate(payload, tuple(statuses), tuple(slots))
 
 
-def _value_offset(payload: bytes, start: int, end: int, key: str, text: str) -> int:
+def value_offset(payload: bytes, start: int, end: int, key: str, text: str) -> int:
     """Where the text of the value of `key` starts in the status encoded in payload[start:end]."""
     needle = _U32.pack(len(key) + 1) + key.encode() + b"\x00"
     at = payload.find(needle, start, end)
