@@ -16,8 +16,11 @@ workers) over the window; the generator's own CPU per 1,000 robots is printed be
 With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
 the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
 same Prometheus, a static server answering the exporter's own bytes: Prometheus's own
-`scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed. The lost
-updates then cover the whole run, Prometheus included.
+`scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed; with
+`--rules`, then a Prometheus with the shipped default config and rules (scraping every
+`--scrape-interval`) gives each rule group's evaluation time as a share of its interval (target <= 10 %,
+with the generator's 2 % of robots in trouble). The lost updates then cover the whole run, Prometheus
+included.
 """
 
 from __future__ import annotations
@@ -31,13 +34,14 @@ import urllib.request
 from dataclasses import replace
 from pathlib import Path
 
+from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
 from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, static_server
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.loadgen import running_loadgen
 from testbed.processes import running_exporter
-from testbed.prometheus import running_prometheus
+from testbed.prometheus import running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
 COMPONENTS = 50
@@ -129,6 +133,25 @@ def check_rows(url: str, robot: str, runs: int = CHECK_RUNS) -> list[Row]:
     ]
 
 
+def shipped_rules_rows(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
+    """The default profile's shipped config and rules, scraping every `interval`: each group's share."""
+    config = shipped_config(PROFILES["default"], exporter_url)
+    config["global"].update(scrape_interval=f"{interval}s", scrape_timeout=f"{interval}s")
+    with running_prometheus(directory, config) as prometheus:
+        time.sleep(2 * interval)  # the first scrapes in: the rules then read the whole fleet
+        phase = observe(prometheus, seconds)
+        counts = alert_counts(prometheus)
+    return [
+        *target_rows("shipped rules", phase),
+        Row(
+            "scale",
+            "shipped rules: alerts firing / pending",
+            counts.get("firing", 0),
+            f"/ {counts.get('pending', 0)}",
+        ),
+    ]
+
+
 def run(
     robots: int,
     workers: int,
@@ -137,11 +160,15 @@ def run(
     prometheus_seconds: float = 0,
     interval: int = 30,
     exporter_options: tuple[str, ...] = (),
+    rules: bool = False,
 ) -> list[Row]:
     """Publish `robots` x 50 at 1 Hz for `seconds` into an exporter with `workers` ingest workers."""
     label = f"{robots} robots x {COMPONENTS}, {profile}, {workers} worker{'s' if workers > 1 else ''}"
     label += "".join(f", {option}" for option in exporter_options)
-    publishing = seconds + (prometheus_seconds + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0)
+    phases = 1 + rules  # the floor's, then the rules'
+    publishing = seconds + (
+        phases * (prometheus_seconds + 2 * interval) + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0
+    )
     with (
         tempfile.TemporaryDirectory() as tmp,
         running_router_process(Path(tmp)) as (port, router),
@@ -180,6 +207,10 @@ def run(
                     prometheus_rows = scrape_against_floor(
                         exporter.url, Path(tmp), prometheus_seconds, interval
                     )
+                    if rules:
+                        prometheus_rows += shipped_rules_rows(
+                            exporter.url, Path(tmp) / "rules", prometheus_seconds, interval
+                        )
                     figures = loadgen.finish()
                 else:
                     figures = loadgen.figures(seconds + 600)
@@ -222,6 +253,9 @@ def main() -> None:
     parser.add_argument(
         "--exporter-option", action="append", default=[], help="passed to `overseer run` (repeat for several)"
     )
+    parser.add_argument(
+        "--rules", action="store_true", help="then the shipped rules too (with --prometheus-seconds)"
+    )
     options = parser.parse_args()
     rows: list[Row] = []
     for robots in [int(size) for size in options.robots.split(",")]:
@@ -234,6 +268,7 @@ def main() -> None:
                 options.prometheus_seconds,
                 options.scrape_interval,
                 tuple(options.exporter_option),
+                options.rules,
             )
     emit(rows)
 
