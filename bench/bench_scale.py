@@ -19,8 +19,8 @@ same Prometheus, a static server answering the exporter's own bytes: Prometheus'
 `scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed; with
 `--rules`, then a Prometheus with the shipped default config and rules (scraping every
 `--scrape-interval`) gives each rule group's evaluation time as a share of its interval (target <= 10 %,
-with the generator's 2 % of robots in trouble). The lost updates then cover the whole run, Prometheus
-included.
+with the generator's 2 % of robots in trouble), and the rules that cost the most, from /api/v1/rules.
+The lost updates then cover the whole run, Prometheus included.
 """
 
 from __future__ import annotations
@@ -41,12 +41,13 @@ from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.loadgen import running_loadgen
 from testbed.processes import running_exporter
-from testbed.prometheus import running_prometheus, shipped_config
+from testbed.prometheus import Prometheus, running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
 COMPONENTS = 50
 SETTLE_SECONDS = 4.0  # after the generator stops, for the last samples to be counted
 FLOOR_RATIO = 1.3  # Prometheus's scrape of the exporter against its scrape of the same bytes served static
+RULE_SHARE_SHOWN = 0.5  # % of the group's interval: the rules that cost at least this get a row
 CHECK_RUNS = 10
 CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the fleet publishes
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
@@ -133,6 +134,23 @@ def check_rows(url: str, robot: str, runs: int = CHECK_RUNS) -> list[Row]:
     ]
 
 
+def rule_times(
+    prometheus: Prometheus, readings: int = 5, apart: float = 15.0
+) -> dict[tuple[str, str], float]:
+    """Each rule's median evaluation time over `readings` of /api/v1/rules, in % of its group's interval."""
+    times: dict[tuple[str, str], list[float]] = {}
+    intervals: dict[str, float] = {}
+    for reading in range(readings):
+        if reading:
+            time.sleep(apart)
+        for group in prometheus.api("rules")["groups"]:
+            intervals[group["name"]] = float(group["interval"])
+            for rule in group["rules"]:
+                key = (group["name"], rule["name"])
+                times.setdefault(key, []).append(float(rule["evaluationTime"]))
+    return {key: 100 * statistics.median(values) / intervals[key[0]] for key, values in times.items()}
+
+
 def shipped_rules_rows(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
     """The default profile's shipped config and rules, scraping every `interval`: each group's share."""
     config = shipped_config(PROFILES["default"], exporter_url)
@@ -141,8 +159,14 @@ def shipped_rules_rows(exporter_url: str, directory: Path, seconds: float, inter
         time.sleep(2 * interval)  # the first scrapes in: the rules then read the whole fleet
         phase = observe(prometheus, seconds)
         counts = alert_counts(prometheus)
+        rules = rule_times(prometheus)
     return [
         *target_rows("shipped rules", phase),
+        *(
+            Row("scale", f"shipped rules: {group}, {rule}: median", share, "% of the group's interval")
+            for (group, rule), share in sorted(rules.items(), key=lambda item: -item[1])
+            if share >= RULE_SHARE_SHOWN
+        ),
         Row(
             "scale",
             "shipped rules: alerts firing / pending",
