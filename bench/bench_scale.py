@@ -10,8 +10,9 @@ ramp-up (every robot's first array) is inside the window. Beside the fleet, one 
 model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
 the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
 Lost updates = messages the generator published minus messages the exporter counted as received (the
-probe's taken out); CPU is the exporter's processes' (main and
-workers) over the window; the generator's own CPU per 1,000 robots is printed beside every figure.
+probe's taken out); CPU is the exporter's processes' (main and workers) over the window; the
+generator's own CPU per 1,000 robots is printed beside every figure. `--transport dds` publishes raw
+DDS writes on a fresh loopback domain instead, with no router and no probe (it publishes as rmw_zenoh).
 
 With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
 the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
@@ -26,12 +27,14 @@ The lost updates then cover the whole run, Prometheus included.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import statistics
 import tempfile
 import time
 import urllib.request
-from dataclasses import replace
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
@@ -40,7 +43,9 @@ from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, stati
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.loadgen import running_loadgen
-from testbed.processes import running_exporter
+from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
+from testbed.ports import fresh_domain_id
+from testbed.processes import RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
@@ -53,11 +58,11 @@ CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
 
 
-def received(url: str) -> float:
-    """overseer_messages_total{result="received"} over Zenoh."""
+def received(url: str, transport: str) -> float:
+    """overseer_messages_total{result="received"} over `transport`."""
     with urllib.request.urlopen(url + "/metrics", timeout=300) as response:
         text = response.read().decode()
-    match = re.search(r'overseer_messages_total\{result="received",transport="zenoh"\} (\S+)', text)
+    match = re.search(rf'overseer_messages_total\{{result="received",transport="{transport}"\}} (\S+)', text)
     return float(match.group(1)) if match else 0.0
 
 
@@ -68,6 +73,39 @@ def scrape(url: str) -> tuple[float, int]:
     with urllib.request.urlopen(request, timeout=300) as response:
         size = len(response.read())
     return time.perf_counter() - started, size
+
+
+@dataclass(frozen=True)
+class Wiring:
+    """How the exporter and the generator reach each other over one transport, and the router if any."""
+
+    exporter_args: tuple[str, ...]
+    loadgen_args: tuple[str, ...]
+    domain: int | None = None  # the DDS domain
+    router: RunningProcess | None = None  # the Zenoh router
+    zenoh_endpoint: str | None = None
+
+    def router_cpu(self) -> float:
+        """The router's CPU seconds so far (0 without one)."""
+        return cpu_seconds(self.router.process.pid) if self.router else 0.0
+
+    def probe(self, exporter_url: str) -> contextlib.AbstractContextManager[ChangeProbe | None]:
+        """The change probe over Zenoh; none over DDS (the probe publishes as rmw_zenoh does)."""
+        if self.zenoh_endpoint is None:
+            return contextlib.nullcontext()
+        return ChangeProbe(exporter_url, self.zenoh_endpoint, COMPONENTS)
+
+
+@contextlib.contextmanager
+def wiring(transport: str, directory: Path) -> Iterator[Wiring]:
+    """A Zenoh router for both sides, or a fresh DDS domain on loopback."""
+    if transport == DDS:
+        domain = fresh_domain_id()
+        yield Wiring((), ("--transport=dds", f"--domain={domain}"), domain)  # Zenoh is off unless asked
+        return
+    with running_router_process(directory) as (port, router):
+        loadgen_args = (f"--zenoh.connect={endpoint(port)}", "--zenoh.listen=tcp/127.0.0.1:0")
+        yield Wiring(exporter_args(port), loadgen_args, None, router, endpoint(port))
 
 
 def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
@@ -185,9 +223,11 @@ def run(
     interval: int = 30,
     exporter_options: tuple[str, ...] = (),
     rules: bool = False,
+    transport: str = ZENOH,
 ) -> list[Row]:
     """Publish `robots` x 50 at 1 Hz for `seconds` into an exporter with `workers` ingest workers."""
-    label = f"{robots} robots x {COMPONENTS}, {profile}, {workers} worker{'s' if workers > 1 else ''}"
+    plural = "s" if workers > 1 else ""
+    label = f"{robots} robots x {COMPONENTS}, {transport}, {profile}, {workers} worker{plural}"
     label += "".join(f", {option}" for option in exporter_options)
     phases = 1 + rules  # the floor's, then the rules'
     publishing = seconds + (
@@ -195,11 +235,11 @@ def run(
     )
     with (
         tempfile.TemporaryDirectory() as tmp,
-        running_router_process(Path(tmp)) as (port, router),
+        wiring(transport, Path(tmp)) as wires,
         running_exporter(
             Path(tmp),
-            None,
-            *exporter_args(port),
+            wires.domain,
+            *wires.exporter_args,
             f"--ingest.workers={workers}",
             f"--fleet.max-robots={2 * robots}",  # the cap is shared out by hash: headroom, not a limit
             "--log.level=warning",
@@ -207,23 +247,21 @@ def run(
         ) as exporter,
     ):
         pid = exporter.process.pid
-        started_cpu, router_cpu, started = tree_cpu_seconds(pid), cpu_seconds(router.process.pid), 0.0
+        started_cpu, router_cpu, started = tree_cpu_seconds(pid), wires.router_cpu(), 0.0
         with running_loadgen(
             [
                 f"--robots={robots}",
                 f"--profile={profile}",
-                f"--zenoh.connect={endpoint(port)}",
-                "--zenoh.listen=tcp/127.0.0.1:0",
+                *wires.loadgen_args,
                 f"--wait-for-subscribers={max(60, robots / 50)}",
                 f"--duration={publishing}",
             ],
             Path(tmp),
         ) as loadgen:
             loadgen.wait_ready(max(60, robots / 50))
-            started, started_cpu = time.monotonic(), tree_cpu_seconds(pid)
-            router_cpu = cpu_seconds(router.process.pid)
+            started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
             prometheus_rows: list[Row] = []
-            with ChangeProbe(exporter.url, endpoint(port), COMPONENTS) as probe:
+            with wires.probe(exporter.url) as probe:
                 time.sleep(max(0.0, seconds - CHECK_SECONDS))
                 checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
                 if prometheus_seconds:
@@ -241,8 +279,8 @@ def run(
         time.sleep(SETTLE_SECONDS)
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
-        router_cpu = cpu_seconds(router.process.pid) - router_cpu
-        got = received(exporter.url) - probe.published
+        router_cpu = wires.router_cpu() - router_cpu
+        got = received(exporter.url, transport) - (probe.published if probe else 0)
         rss = tree_resident_bytes(pid)
         scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
     lost = max(0.0, figures.published - got)
@@ -253,10 +291,14 @@ def run(
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
         Row("scale", f"{label}: exporter memory a component", rss / (robots * COMPONENTS), "bytes"),
-        Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core"),
+        *(
+            [Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core")]
+            if wires.router
+            else []
+        ),
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
-        *probe.rows(label),
+        *(probe.rows(label) if probe else []),
     ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
 
 
@@ -266,6 +308,7 @@ def main() -> None:
     parser.add_argument("--robots", default="1000", help="comma-separated fleet sizes (default 1000)")
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     parser.add_argument("--profile", default="realistic", choices=["realistic", "live"])
+    parser.add_argument("--transport", default=ZENOH, choices=TRANSPORTS, help="zenoh (default) or dds")
     parser.add_argument("--seconds", type=float, default=60)
     parser.add_argument(
         "--prometheus-seconds",
@@ -293,6 +336,7 @@ def main() -> None:
                 options.scrape_interval,
                 tuple(options.exporter_option),
                 options.rules,
+                options.transport,
             )
     emit(rows)
 
