@@ -29,6 +29,7 @@ BENCHMARKS = (
     "bench.bench_inventory",
     "bench.bench_first_look",
     "bench.bench_scale",
+    "bench.bench_rules_at_scale",
 )
 
 

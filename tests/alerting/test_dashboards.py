@@ -215,22 +215,28 @@ FILTER_FLEET = {
 
 
 def filter_fleet_series() -> list[dict[str, str]]:
-    """The input series of FILTER_FLEET: each robot's level, up, info (unless None) and one component."""
+    """FILTER_FLEET's input series: each robot's level, up, info (unless None), one component's counts."""
     series = []
     for robot, (labels, level) in FILTER_FLEET.items():
         own = f'job="overseer", instance="overseer:9849", robot="{robot}"'
         series += [
             {"series": f"ros_diagnostics_robot_level{{{own}}}", "values": f"{level}x8"},
             {"series": f"ros_diagnostics_robot_up{{{own}}}", "values": "1x8"},
+        ]
+        series += [
             {
-                "series": f'ros_diagnostics_level{{{own}, component="/Laser", hardware_id=""}}',
-                "values": f"{level}x8",
-            },
+                "series": f'ros_diagnostics_robot_components{{{own}, level="{name}"}}',
+                "values": f"{int(value == level)}x8",
+            }
+            for value, name in enumerate(LEVEL_NAMES)
         ]
         if labels is not None:
             inventory = "".join(f', {name}="{value}"' for name, value in labels.items())
             series.append({"series": f"ros_diagnostics_robot_info{{{own}{inventory}}}", "values": "1x8"})
     return series
+
+
+LEVEL_NAMES = ("OK", "WARN", "ERROR", "STALE")
 
 
 # (site, model, team) chosen, None for All → the robots the fleet overview shows.
@@ -438,9 +444,9 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
                 timeout=60,
                 message="10s of recorded fleet counts",
             )
-            # The component counts are recorded once a minute (overseer.components), whatever the interval.
+            # The fleet's component counts are recorded once a minute (overseer.components).
             wait_for(
-                lambda: prometheus.query('fleet:ros_diagnostics_level:count{level="ERROR"} > 0'),
+                lambda: prometheus.query('fleet:ros_diagnostics_robot_components:sum{level="ERROR"} > 0'),
                 timeout=90,
                 message="recorded component counts",
             )

@@ -130,6 +130,27 @@ def test_levels_up_and_robot_level_samples() -> None:
     assert sample_value(rendering, "ros_diagnostics_value", {**battery, "key": "note"}) is None
 
 
+def component_counts(rendering: Rendering, robot: str) -> dict[str, float | None]:
+    """The robot's ros_diagnostics_robot_components samples, by level name."""
+    return {
+        level.name: sample_value(
+            rendering, "ros_diagnostics_robot_components", {"robot": robot, "level": level.name}
+        )
+        for level in Level
+    }
+
+
+def test_each_robot_counts_its_components_at_every_level_now_stale_ones_and_a_down_robot_included() -> None:
+    rendering, model, clock = fleet_rendering(PAPER_FLEET)
+    assert component_counts(rendering, "robot1") == {"OK": 1, "WARN": 1, "ERROR": 0, "STALE": 0}
+    assert component_counts(rendering, "site_a/robot7") == {"OK": 0, "WARN": 0, "ERROR": 1, "STALE": 0}
+    clock.now += 6  # past stale_after: robot1's temperature is STALE, its battery reported again
+    model.apply("robot1", DiagnosticArray(0, 0, "", (PAPER_FLEET["robot1"][0],)), "dds")
+    assert component_counts(rendering, "robot1") == {"OK": 1, "WARN": 0, "ERROR": 0, "STALE": 1}
+    clock.now += 10  # past robot_timeout: robot1 is down, every component STALE
+    assert component_counts(rendering, "robot1") == {"OK": 0, "WARN": 0, "ERROR": 0, "STALE": 2}
+
+
 def test_only_allowed_value_keys_are_exported() -> None:
     rendering, _, _ = fleet_rendering(PAPER_FLEET, value_keys="temperature|fps")
     text = rendering.fast().decode()

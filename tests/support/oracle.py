@@ -21,6 +21,7 @@ from overseer.codec import compiled
 from overseer.fleet import metric_families as contract
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels
 from overseer.fleet.metric_values import DROP_REASONS, NumericValues, message_counts
+from overseer.levels import Level
 from overseer.model import FleetModel
 from overseer.model.state import learned_period
 
@@ -81,9 +82,11 @@ class OracleCollector(Collector):
             families[contract.ROBOT_INFO.name].add_sample(
                 contract.ROBOT_INFO.name, {"robot": robot.name, **inventory_labels}, 1.0
             )
+            at_level = dict.fromkeys(Level, 0)
             for key, component in robot.components.items():
                 labels = (robot.name, component.name, component.hardware_id)
                 level = snapshot.component_level(robot, key, component, up)
+                at_level[level] += 1
                 add(contract.LEVEL, labels, float(level))
                 if self._level_changes:
                     add(contract.LEVEL_CHANGES, labels, float(component.level_changes))
@@ -92,6 +95,8 @@ class OracleCollector(Collector):
                 message = self._messages.label(component)
                 if message is not None:
                     add(contract.STATUS_MESSAGE, (*labels, level.name, message), 1.0)
+            for level, count in at_level.items():
+                add(contract.ROBOT_COMPONENTS, [robot.name, level.name], float(count))
         for (transport, result), count in message_counts(snapshot.message_counts, self._transports):
             add(contract.MESSAGES, [transport, result], float(count))
         for reason in DROP_REASONS:

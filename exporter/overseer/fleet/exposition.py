@@ -50,6 +50,7 @@ class _RobotLines:
     timing: RobotTiming  # when its components turn STALE, for this revision
     robot_level: Level
     info: str  # its ros_diagnostics_robot_info line
+    counts: bytes  # its ros_diagnostics_robot_components lines
     levels: bytes
     changes: bytes
     values: bytes
@@ -90,7 +91,7 @@ class FleetExposition:
         render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
-        robot_level, robot_up, last_message, periods, info = [], [], [], [], []
+        robot_level, robot_up, last_message, periods, info, counts = [], [], [], [], [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
@@ -105,6 +106,7 @@ class FleetExposition:
             robot_level.append(f"ros_diagnostics_robot_level{label}{go_float(float(lines.robot_level))}\n")
             robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
             info.append(lines.info)
+            counts.append(lines.counts)
             if robot.last_message is not None:
                 last_message.append(
                     f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
@@ -123,6 +125,7 @@ class FleetExposition:
                 "".join(last_message).encode(),
                 "".join(periods).encode(),
                 "".join(info).encode(),
+                b"".join(counts),
                 b"".join(changes),
                 b"".join(values),
                 b"".join(messages),
@@ -212,6 +215,7 @@ def _lines_for(
         timing,
         worst(levels) if up else Level.STALE,
         _info_line(robot, escape) if cached is None or not same_revision else cached.info,
+        _counts_lines(robot_label, levels),
         level_lines,
         changes,
         values_lines,
@@ -290,6 +294,17 @@ def _info_line(robot: RobotState, escape: Callable[[str], str]) -> str:
         labels.extend(robot.listing.labels)
     text = ",".join(f'{name}="{escape(value)}"' for name, value in sorted(labels))
     return f"ros_diagnostics_robot_info{{{text}}} 1.0\n"
+
+
+def _counts_lines(robot_label: str, levels: list[Level]) -> bytes:
+    """The robot's ros_diagnostics_robot_components lines: its components at each level, 0 included."""
+    return "".join(
+        [
+            f'ros_diagnostics_robot_components{{level="{level.name}",{robot_label}}} '
+            f"{go_float(float(levels.count(level)))}\n"
+            for level in Level
+        ]
+    ).encode()
 
 
 def _status_message_line(identity: str, level: Level, message: str, robot_label: str) -> bytes:

@@ -64,6 +64,13 @@ ROBOT_INFO = MetricFamily(
     "Join it where a label is needed: * on (robot) group_left (site) ros_diagnostics_robot_info.",
     ("robot",),  # and the robot's inventory labels, which differ from robot to robot
 )
+ROBOT_COMPONENTS = MetricFamily(
+    "ros_diagnostics_robot_components",
+    "gauge",
+    "The robot's components at each level now (OK, WARN, ERROR, STALE: as ros_diagnostics_level has "
+    "them), 0 included: per-robot counts without a pass over every component.",
+    ("robot", "level"),
+)
 LEVEL_CHANGES = MetricFamily(
     "ros_diagnostics_level_changes",
     "counter",
@@ -133,6 +140,7 @@ FLEET_FAMILIES = (
     LAST_MESSAGE,
     PERIOD,
     ROBOT_INFO,
+    ROBOT_COMPONENTS,
     LEVEL_CHANGES,
     VALUE,
     STATUS_MESSAGE,
