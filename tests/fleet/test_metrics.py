@@ -151,6 +151,24 @@ def test_each_robot_counts_its_components_at_every_level_now_stale_ones_and_a_do
     assert component_counts(rendering, "robot1") == {"OK": 0, "WARN": 0, "ERROR": 0, "STALE": 2}
 
 
+def test_a_robots_level_changes_add_up_its_components_and_do_not_fall_when_one_is_forgotten() -> None:
+    rendering, model, clock = fleet_rendering(PAPER_FLEET)
+    battery, temperature = PAPER_FLEET["robot1"]
+    robot1 = {"robot": "robot1"}
+    for level in (0, 1, 2):  # WARN -> OK -> WARN -> ERROR: three changes
+        model.apply("robot1", DiagnosticArray(0, 0, "", (battery, temperature._replace(level=level))), "dds")
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 3
+    for _ in range(7):  # the battery alone for longer than expire_after (60 s): the temperature goes
+        clock.now += 10
+        model.apply("robot1", DiagnosticArray(0, 0, "", (battery,)), "dds")
+    model.expire()
+    labels = {"robot": "robot1", "component": temperature.name, "hardware_id": temperature.hardware_id}
+    assert sample_value(rendering, "ros_diagnostics_level", labels) is None
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 3
+    model.apply("robot1", DiagnosticArray(0, 0, "", (battery._replace(level=1),)), "dds")
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 4
+
+
 def test_only_allowed_value_keys_are_exported() -> None:
     rendering, _, _ = fleet_rendering(PAPER_FLEET, value_keys="temperature|fps")
     text = rendering.fast().decode()

@@ -51,6 +51,7 @@ class _RobotLines:
     robot_level: Level
     info: str  # its ros_diagnostics_robot_info line
     counts: bytes  # its ros_diagnostics_robot_components lines
+    robot_changes: bytes  # its ros_diagnostics_robot_level_changes_total line
     levels: bytes
     changes: bytes
     values: bytes
@@ -91,7 +92,8 @@ class FleetExposition:
         render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
-        robot_level, robot_up, last_message, periods, info, counts = [], [], [], [], [], []
+        robot_level, robot_up, last_message, periods, info = [], [], [], [], []
+        counts, robot_changes = [], []
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
@@ -107,6 +109,7 @@ class FleetExposition:
             robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
             info.append(lines.info)
             counts.append(lines.counts)
+            robot_changes.append(lines.robot_changes)
             if robot.last_message is not None:
                 last_message.append(
                     f"ros_diagnostics_robot_last_message_timestamp_seconds{label}"
@@ -126,6 +129,7 @@ class FleetExposition:
                 "".join(periods).encode(),
                 "".join(info).encode(),
                 b"".join(counts),
+                b"".join(robot_changes),
                 b"".join(changes),
                 b"".join(values),
                 b"".join(messages),
@@ -215,7 +219,8 @@ def _lines_for(
         timing,
         worst(levels) if up else Level.STALE,
         _info_line(robot, escape) if cached is None or not same_revision else cached.info,
-        _counts_lines(robot_label, levels),
+        _counts_lines(robot_label, levels, number),
+        _ROBOT_CHANGES.format(robot_label, number(robot.level_changes)).encode(),
         level_lines,
         changes,
         values_lines,
@@ -296,15 +301,19 @@ def _info_line(robot: RobotState, escape: Callable[[str], str]) -> str:
     return f"ros_diagnostics_robot_info{{{text}}} 1.0\n"
 
 
-def _counts_lines(robot_label: str, levels: list[Level]) -> bytes:
+def _counts_lines(robot_label: str, levels: list[Level], number: Callable[[float], str]) -> bytes:
     """The robot's ros_diagnostics_robot_components lines: its components at each level, 0 included."""
-    return "".join(
-        [
-            f'ros_diagnostics_robot_components{{level="{level.name}",{robot_label}}} '
-            f"{go_float(float(levels.count(level)))}\n"
-            for level in Level
-        ]
+    count = levels.count
+    return (
+        f'ros_diagnostics_robot_components{{level="OK",{robot_label}}} {number(count(_OK))}\n'
+        f'ros_diagnostics_robot_components{{level="WARN",{robot_label}}} {number(count(_WARN))}\n'
+        f'ros_diagnostics_robot_components{{level="ERROR",{robot_label}}} {number(count(_ERROR))}\n'
+        f'ros_diagnostics_robot_components{{level="STALE",{robot_label}}} {number(count(_STALE))}\n'
     ).encode()
+
+
+_OK, _WARN, _ERROR, _STALE = Level
+_ROBOT_CHANGES = "ros_diagnostics_robot_level_changes_total{{{}}} {}\n"
 
 
 def _status_message_line(identity: str, level: Level, message: str, robot_label: str) -> bytes:

@@ -71,6 +71,13 @@ ROBOT_COMPONENTS = MetricFamily(
     "them), 0 included: per-robot counts without a pass over every component.",
     ("robot", "level"),
 )
+ROBOT_LEVEL_CHANGES = MetricFamily(
+    "ros_diagnostics_robot_level_changes",
+    "counter",
+    "Changes of the reported level of the robot's components, all added up (those it no longer has "
+    "included): one series a robot, for dashboards; RosRobotFlapping reads the components' own.",
+    ("robot",),
+)
 LEVEL_CHANGES = MetricFamily(
     "ros_diagnostics_level_changes",
     "counter",
@@ -141,6 +148,7 @@ FLEET_FAMILIES = (
     PERIOD,
     ROBOT_INFO,
     ROBOT_COMPONENTS,
+    ROBOT_LEVEL_CHANGES,
     LEVEL_CHANGES,
     VALUE,
     STATUS_MESSAGE,

@@ -182,6 +182,7 @@ class FleetModel:
                 steady_wall_offset(state.wall_offset, now, wall),
                 up_since(self.limits, state, now),
                 state.listing,
+                state.dropped_level_changes,
             )
             self._message_counts[(transport, "received")] += 1
         return True
@@ -245,6 +246,7 @@ class FleetModel:
                 offset,
                 up_since(limits, state, now),
                 state.listing,
+                state.dropped_level_changes + merge.dropped_level_changes,
             )
             self._dropped_statuses.update(dropped)
             self._truncated_strings += truncated
@@ -338,6 +340,7 @@ class FleetModel:
                 offset,
                 up_since(self.limits, state, now),
                 state.listing,
+                state.dropped_level_changes,
             )
             self._message_counts[(transport, "received")] += 1
             if changes and listener is not None:
@@ -540,6 +543,7 @@ class _Merge:
         self._missing = set(state.missing)
         self._in_message: set[ComponentKey] = set()
         self.added = False  # a component the robot had not reported: its expectations are judged again
+        self.dropped_level_changes = 0  # those of the components this message replaced
         self._taken_over: dict[str, set[ComponentKey]] = {}  # other feeds → the components taken from them
 
     def statuses(
@@ -551,7 +555,9 @@ class _Merge:
         for name in first_ids:
             if name not in self._clashed:  # kept apart from now on: the component under the name alone goes
                 self._clashed.add(name)
-                components.pop((name, ""), None)
+                gone = components.pop((name, ""), None)
+                if gone is not None:
+                    self.dropped_level_changes += gone.level_changes
         latest: list[ComponentKey | None] = []
         for entry in prepared:
             if entry is None:
@@ -788,6 +794,7 @@ def _replace_components(
 
     Expectations the components no longer meet get their stand-ins.
     """
+    dropped = sum([c.level_changes for key, c in state.components.items() if key not in components])
     components = expected_components(state.listing, components, now)
     carried = {component.feed for component in components.values()}
     feeds = tuple(
@@ -804,4 +811,5 @@ def _replace_components(
         revision=state.revision + 1,
         feeds=feeds,
         missing=state.missing.intersection(components),
+        dropped_level_changes=state.dropped_level_changes + dropped,
     )

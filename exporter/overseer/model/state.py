@@ -188,6 +188,14 @@ class RobotState:
     wall_offset: float = 0.0  # wall clock minus monotonic clock, at the last message (or discovery)
     up_since: float = 0.0  # the first message since it was last down (silent, or its publisher gone)
     listing: ListedRobot | None = None
+    dropped_level_changes: int = 0  # those of components it no longer has, so that its total never falls
+
+    @property
+    def level_changes(self) -> int:
+        """Every level change its components reported while it was followed, those dropped since included."""
+        return self.dropped_level_changes + sum(
+            [component.level_changes for component in self.components.values()]
+        )
 
     @property
     def last_seen(self) -> float:
