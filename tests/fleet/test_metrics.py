@@ -169,6 +169,44 @@ def test_a_robots_level_changes_add_up_its_components_and_do_not_fall_when_one_i
     assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 4
 
 
+def test_a_robots_level_changes_keep_those_of_a_topic_it_left_and_of_a_name_split_by_hardware_id() -> None:
+    rendering, model, _ = fleet_rendering({})
+    robot1 = {"robot": "robot1"}
+    motor = DiagnosticStatus(0, "/Motor", "ok", "")
+    for level in (0, 1, 0):  # two changes on /diagnostics
+        model.apply(
+            "robot1", DiagnosticArray(0, 0, "", (motor._replace(level=level),)), "dds", "/diagnostics"
+        )
+    model.forget_topic("robot1", "/diagnostics")  # it publishes /diagnostics_agg after all
+    assert (
+        sample_value(rendering, "ros_diagnostics_level", {**robot1, "component": "/Motor", "hardware_id": ""})
+        is None
+    )
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 2
+    for level in (0, 2):  # one change on /diagnostics_agg
+        model.apply(
+            "robot1", DiagnosticArray(0, 0, "", (motor._replace(level=level),)), "dds", "/diagnostics_agg"
+        )
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 3
+    # Two statuses of that name with their own hardware_ids: they are kept apart, the one under the name goes.
+    twins = (motor._replace(hardware_id="left"), motor._replace(hardware_id="right"))
+    model.apply("robot1", DiagnosticArray(0, 0, "", twins), "dds", "/diagnostics_agg")
+    assert sample_value(rendering, "ros_diagnostics_robot_level_changes_total", robot1) == 3
+
+
+def test_a_robot_forgotten_and_listed_again_is_rendered_anew_not_from_its_former_lines() -> None:
+    rendering, model, clock = fleet_rendering(PAPER_FLEET)
+    laser, camera = Expectation("/Laser", exact="/Laser"), Expectation("/Camera", exact="/Camera")
+    model.set_inventory(Inventory({"robotX": ListedRobot((("site", "a"),), (laser,))}))
+    assert sample_value(rendering, "ros_diagnostics_robot_info", {"robot": "robotX", "site": "a"}) == 1
+    model.set_inventory(Inventory({}))  # never heard: forgotten at once
+    clock.now += 1
+    model.set_inventory(Inventory({"robotX": ListedRobot((("site", "b"),), (laser, camera))}))
+    assert sample_value(rendering, "ros_diagnostics_robot_info", {"robot": "robotX", "site": "a"}) is None
+    assert sample_value(rendering, "ros_diagnostics_robot_info", {"robot": "robotX", "site": "b"}) == 1
+    assert component_counts(rendering, "robotX") == {"OK": 0, "WARN": 0, "ERROR": 0, "STALE": 2}
+
+
 def test_only_allowed_value_keys_are_exported() -> None:
     rendering, _, _ = fleet_rendering(PAPER_FLEET, value_keys="temperature|fps")
     text = rendering.fast().decode()

@@ -46,7 +46,7 @@ class _RobotLines:
     not change), so they are copied instead.
     """
 
-    signature: tuple[int, bool, tuple[int, ...]]
+    signature: tuple[tuple[int, float], bool, tuple[int, ...]]
     timing: RobotTiming  # when its components turn STALE, for this revision
     robot_level: Level
     info: str  # its ros_diagnostics_robot_info line
@@ -158,10 +158,12 @@ class ExpositionPart:
 def _lines_for(
     snapshot: FleetSnapshot, robot: RobotState, up: bool, cached: _RobotLines | None, render: _RenderCache
 ) -> _RobotLines:
-    same_revision = cached is not None and cached.signature[0] == robot.revision
+    # A robot forgotten and followed again starts its revisions over: when it was discovered tells them apart.
+    revision = (robot.revision, robot.discovered_at)
+    same_revision = cached is not None and cached.signature[0] == revision
     timing = cached.timing if cached is not None and same_revision else snapshot.timing(robot)
     # How far its components have gone STALE: while that holds, so do their levels.
-    signature = (robot.revision, up, snapshot.staleness(robot, timing))
+    signature = (revision, up, snapshot.staleness(robot, timing))
     if cached is not None and cached.signature == signature:
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
