@@ -3,10 +3,12 @@
 A fleet model of N robots x 50 components (`--trouble` of them with two ERROR and three WARN leaves, the rest
 OK) is filled in this process and rendered once by the exporter's own renderer, without key-values (as
 `metrics.value_keys: []`; every other family is in). Debian's Prometheus scrapes those bytes, served
-static, every `--scrape-interval` with the shipped default profile's config and rules: each group's median
-and worst evaluation time as a share of its interval (target <= 10 %), and its costliest rules from
-/api/v1/rules. Nothing else runs: no fleet, router or exporter shares the cores, so this is what the rules
-themselves cost at that size, where `bench_scale --rules` measures them beside the whole pipeline.
+static, every `--scrape-interval` with the shipped default profile's config and rules, first for
+`--warm-up` seconds (15 minutes: the longest range the rules read is full from then on), then over a window
+of `--seconds`: each group's median and worst evaluation time as a share of its interval (target <= 10 %),
+how many evaluations that is, and the costliest rules from /api/v1/rules. No fleet, router or exporter
+shares the cores: this is what the rules cost at that size (with `--compare`, beside the other rules),
+where `bench_scale --rules` measures them beside the whole pipeline.
 
 `--compare RULES_FILE` evaluates another rules file in the same Prometheus at the same time, its groups
 renamed `compared_*` (say the previous release's rules, from `git show REV:alert_rules/overseer.rules.yml`):
@@ -48,6 +50,9 @@ WARN, ERROR = 3, 2  # leaves of a robot in trouble
 COMPARED_PREFIX = "compared_"
 RULE_SHARE_SHOWN = 0.5  # per cent of the interval: cheaper rules are left out of the rows
 NO_KEYS = re.compile(r"(?!)")
+WARM_UP = (
+    900.0  # the longest range the rules read (RosRobotFlapping's 15m): every evaluation then reads it whole
+)
 
 
 def fleet_exposition(robots: int, trouble: int) -> bytes:
@@ -97,16 +102,16 @@ def shipped_alert_counts(alerts: list[dict[str, Any]]) -> dict[str, int]:
 
 
 def measure(
-    body: bytes, directory: Path, seconds: float, interval: int, compare: Path | None
+    body: bytes, directory: Path, seconds: float, interval: int, warm_up: float, compare: Path | None
 ) -> tuple[list[Row], dict[str, Any]]:
-    """The shipped rules (and `compare`'s) over `body` scraped every `interval`: each group's share."""
+    """The shipped rules (and `compare`'s) over `body` scraped every `interval`, after `warm_up` seconds."""
     with static_server(body, TEXT.content_type) as target:
         config = shipped_config(PROFILES["default"], f"http://{target}")
         config["global"].update(scrape_interval=f"{interval}s", scrape_timeout=f"{interval}s")
         if compare is not None:
             config["rule_files"].append(str(compared_rules(compare, directory / "compared.rules.yml")))
         with running_prometheus(directory, config) as prometheus:
-            time.sleep(2 * interval)  # two scrapes in: every rule then reads the whole fleet
+            time.sleep(max(warm_up, 2 * interval))
             phase = observe(prometheus, seconds)
             counts = shipped_alert_counts(prometheus.alerts())
             rules = rule_times(prometheus)
@@ -132,7 +137,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--robots", type=int, default=10_000)
     parser.add_argument("--trouble", type=int, default=200, help="robots in ERROR (default 200)")
-    parser.add_argument("--seconds", type=float, default=300.0, help="the window observed")
+    parser.add_argument("--seconds", type=float, default=600.0, help="the window observed")
+    parser.add_argument(
+        "--warm-up",
+        type=float,
+        default=WARM_UP,
+        help="seconds scraped before the window (default 900: RosRobotFlapping's 15m range full)",
+    )
     parser.add_argument("--scrape-interval", type=int, default=60)
     parser.add_argument("--compare", type=Path, help="another rules file, evaluated beside the shipped")
     args = parser.parse_args()
@@ -144,7 +155,9 @@ def main() -> None:
         Row("alert rules", "rules alone: exposition built in", time.monotonic() - started, "s"),
     ]
     with tempfile.TemporaryDirectory(prefix="overseer-rules-at-scale-") as directory:
-        measured, counts = measure(body, Path(directory), args.seconds, args.scrape_interval, args.compare)
+        measured, counts = measure(
+            body, Path(directory), args.seconds, args.scrape_interval, args.warm_up, args.compare
+        )
     rows += measured
     pending = f"/ {counts.get('pending', 0)}"
     rows.append(
