@@ -96,24 +96,36 @@ def observe(prometheus: Prometheus, seconds: float) -> Phase:
     return Phase(durations, intervals, missed)
 
 
-def floor_rules(rule_file: Path, destination: Path) -> Path:
-    """The rule file's groups with no annotations, their groups, alerts and recording rules renamed."""
+def renamed_rules(
+    rule_file: Path, destination: Path, prefix: str, alert_prefix: str, *, annotations: bool
+) -> Path:
+    """The rule file with its groups, alerts and recording rules renamed, to load beside the original.
+
+    Groups and recording rules (and every expression reading them) take `prefix`, alerts `alert_prefix`;
+    `annotations` False leaves the alerts without theirs.
+    """
     document: dict[str, Any] = yaml.safe_load(rule_file.read_text(encoding="utf-8"))
     records = {rule["record"] for group in document["groups"] for rule in group["rules"] if "record" in rule}
     for group in document["groups"]:
-        group["name"] = FLOOR_PREFIX + group["name"]
+        group["name"] = prefix + group["name"]
         for rule in group["rules"]:
             for record in records:
                 rule["expr"] = re.sub(
-                    rf"(?<![\w:]){re.escape(record)}(?![\w:])", FLOOR_PREFIX + record, rule["expr"]
+                    rf"(?<![\w:]){re.escape(record)}(?![\w:])", prefix + record, rule["expr"]
                 )
             if "record" in rule:
-                rule["record"] = FLOOR_PREFIX + rule["record"]
+                rule["record"] = prefix + rule["record"]
             else:
-                rule["alert"] = "Floor" + rule["alert"]
-                rule.pop("annotations", None)
+                rule["alert"] = alert_prefix + rule["alert"]
+                if not annotations:
+                    rule.pop("annotations", None)
     destination.write_text(yaml.safe_dump(document, sort_keys=False), encoding="utf-8")
     return destination
+
+
+def floor_rules(rule_file: Path, destination: Path) -> Path:
+    """The rule file's groups with no annotations, their groups, alerts and recording rules renamed."""
+    return renamed_rules(rule_file, destination, FLOOR_PREFIX, "Floor", annotations=False)
 
 
 @dataclass(frozen=True)
@@ -223,11 +235,11 @@ def scrape_health(prometheus: Prometheus, seconds: float) -> ScrapeHealth:
     )
 
 
-def alert_counts(prometheus: Prometheus) -> dict[str, int]:
-    """Prometheus' alerts now by state, the floor's left out."""
+def alert_counts(prometheus: Prometheus, left_out: str = "Floor") -> dict[str, int]:
+    """Prometheus' alerts now by state, those named `left_out`… (the floor's) left out."""
     counts: dict[str, int] = {}
     for alert in prometheus.alerts():
-        if not alert["labels"]["alertname"].startswith("Floor"):
+        if not alert["labels"]["alertname"].startswith(left_out):
             counts[alert["state"]] = counts.get(alert["state"], 0) + 1
     return counts
 

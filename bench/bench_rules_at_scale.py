@@ -27,9 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from bench.bench_alert_rules import PROFILES, median_share, observe, target_rows
+from bench.bench_alert_rules import PROFILES, alert_counts, median_share, observe, renamed_rules, target_rows
 from bench.bench_scale import rule_times
 from bench.bench_scrape import static_server
 from bench.common import Row, emit
@@ -47,7 +45,7 @@ from testbed.prometheus import running_prometheus, shipped_config
 
 LEAVES, SITES = 50, 10
 WARN, ERROR = 3, 2  # leaves of a robot in trouble
-COMPARED_PREFIX = "compared_"
+COMPARED_PREFIX, COMPARED_ALERT_PREFIX = "compared_", "Compared"
 RULE_SHARE_SHOWN = 0.5  # per cent of the interval: cheaper rules are left out of the rows
 NO_KEYS = re.compile(r"(?!)")
 WARM_UP = (
@@ -75,30 +73,7 @@ def fleet_exposition(robots: int, trouble: int) -> bytes:
 
 def compared_rules(rule_file: Path, destination: Path) -> Path:
     """`rule_file` with its groups, alerts and recording rules renamed, so that it runs beside the shipped."""
-    document: dict[str, Any] = yaml.safe_load(rule_file.read_text(encoding="utf-8"))
-    records = {rule["record"] for group in document["groups"] for rule in group["rules"] if "record" in rule}
-    for group in document["groups"]:
-        group["name"] = COMPARED_PREFIX + group["name"]
-        for rule in group["rules"]:
-            for record in records:
-                rule["expr"] = re.sub(
-                    rf"(?<![\w:]){re.escape(record)}(?![\w:])", COMPARED_PREFIX + record, rule["expr"]
-                )
-            if "record" in rule:
-                rule["record"] = COMPARED_PREFIX + rule["record"]
-            else:
-                rule["alert"] = "Compared" + rule["alert"]
-    destination.write_text(yaml.safe_dump(document, sort_keys=False), encoding="utf-8")
-    return destination
-
-
-def shipped_alert_counts(alerts: list[dict[str, Any]]) -> dict[str, int]:
-    """The shipped rules' alerts by state, the compared rules' left out."""
-    counts: dict[str, int] = {}
-    for alert in alerts:
-        if not alert["labels"]["alertname"].startswith("Compared"):
-            counts[alert["state"]] = counts.get(alert["state"], 0) + 1
-    return counts
+    return renamed_rules(rule_file, destination, COMPARED_PREFIX, COMPARED_ALERT_PREFIX, annotations=True)
 
 
 def measure(
@@ -113,7 +88,7 @@ def measure(
         with running_prometheus(directory, config) as prometheus:
             time.sleep(max(warm_up, 2 * interval))
             phase = observe(prometheus, seconds)
-            counts = shipped_alert_counts(prometheus.alerts())
+            counts = alert_counts(prometheus, left_out=COMPARED_ALERT_PREFIX)
             rules = rule_times(prometheus)
     rows = [
         *target_rows("rules alone", phase),

@@ -97,8 +97,7 @@ class OracleCollector(Collector):
                     add(contract.STATUS_MESSAGE, (*labels, level.name, message), 1.0)
             for level, count in at_level.items():
                 add(contract.ROBOT_COMPONENTS, [robot.name, level.name], float(count))
-            changes = robot.dropped_level_changes + sum(c.level_changes for c in robot.components.values())
-            add(contract.ROBOT_LEVEL_CHANGES, [robot.name], float(changes))
+            add(contract.ROBOT_LEVEL_CHANGES, [robot.name], float(robot.level_changes))
         for (transport, result), count in message_counts(snapshot.message_counts, self._transports):
             add(contract.MESSAGES, [transport, result], float(count))
         for reason in DROP_REASONS:
