@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import gc
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -39,6 +40,12 @@ SILENT_ROBOTS, SILENT_FROM, SILENT_UNTIL = 10, 5, 20
 REALISTIC_CHANGES_PER_SECOND = 50
 WORST_SECONDS = 6
 FIRST_MESSAGE_TARGET_US = 50
+BUSY_EVENTS, BUSY_BATCH = 100_000, 10_000
+BUSY_TARGET = 50_000  # events a second beside a busy thread: 10,000 robots' 500,000 `appeared` in 10 s
+_ONE_ROW_INSERT = (
+    "INSERT INTO events (time, robot, kind, component, hardware_id, old_level, new_level, message,"
+    " key_values) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)"
+)
 
 
 class FleetClock:
@@ -214,6 +221,75 @@ def store_figures(directory: Path) -> tuple[float, dict[str, float]]:
     return written / used, latency
 
 
+def busy_interpreter_figures(directory: Path) -> dict[str, float]:
+    """Events a second the store writes while another thread keeps the interpreter busy, and alone.
+
+    As when a whole fleet is first heard: the ingest runs flat out while the writer stores every
+    robot's `appeared` events. Each SQLite statement lets go of the interpreter lock and waits for it
+    back, so what matters is how many statements a batch takes. The shipped writer, alone and beside a
+    busy thread, against one row a statement (`executemany`, as it wrote until 2026-11-27) beside it.
+    """
+    store = EventStore(StoreSettings(str(directory / "busy.db"), 30 * 86400.0, 10**10, queue_limit=10**7))
+    values = (("voltage", "11.2"), ("current", "1.5"), ("temperature", "41.5"))
+
+    def batch(first: int, count: int) -> list[Event]:
+        return [
+            Event(
+                1e9 + i / 1000,
+                f"robot{i // 50}",
+                "appeared",
+                f"/Sensors/S{i % 50}",
+                "hw",
+                None,
+                Level.OK,
+                "ok",
+                values,
+            )
+            for i in range(first, first + count)
+        ]
+
+    def shipped(first: int, count: int) -> None:
+        for start in range(first, first + count, BUSY_BATCH):
+            store.add(batch(start, BUSY_BATCH))
+            store.flush()
+
+    def one_row_a_statement(first: int, count: int) -> None:
+        writer = store._writer
+        assert writer is not None
+        rows = [(*event[:5], None, int(Level.OK), event.message, "[]") for event in batch(first, count)]
+        writer.execute("BEGIN IMMEDIATE")
+        writer.executemany(_ONE_ROW_INSERT, rows)
+        writer.execute("COMMIT")
+
+    figures = {"shipped, alone": _events_a_second(shipped, 0, BUSY_EVENTS, busy=False)}
+    figures["shipped, beside a busy thread"] = _events_a_second(shipped, BUSY_EVENTS, BUSY_EVENTS, busy=True)
+    figures["one row a statement, beside a busy thread"] = _events_a_second(
+        one_row_a_statement, 2 * BUSY_EVENTS, BUSY_EVENTS // 50, busy=True
+    )
+    store.stop()
+    return figures
+
+
+def _events_a_second(write: Callable[[int, int], None], first: int, count: int, busy: bool) -> float:
+    """Events a wall-clock second `write(first, count)` stores, with a thread spinning beside it if `busy`."""
+    stop = threading.Event()
+
+    def spin() -> None:  # pure Python that never waits, as the ingest when samples queue up
+        while not stop.is_set():
+            sum(range(100))
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    if busy:
+        spinner.start()
+    started = time.perf_counter()
+    write(first, count)
+    elapsed = time.perf_counter() - started
+    stop.set()
+    if busy:
+        spinner.join()
+    return count / elapsed
+
+
 def first_message_events(statuses: tuple[DiagnosticStatus, ...]) -> float:
     """Seconds the detector takes to make a robot's 50 `appeared` events from its first message's changes.
 
@@ -338,6 +414,22 @@ def main() -> None:
         )
         for name, seconds in latency.items():
             rows.append(Row("events", f"query on 200,000 events: {name}", 1000 * seconds, "ms"))
+        busy = busy_interpreter_figures(Path(directory))
+        for name, rate in busy.items():
+            beside = name == "shipped, beside a busy thread"
+            target = f">= {BUSY_TARGET:,}" if beside else ""
+            rows.append(
+                Row(
+                    "events",
+                    f"store: {name}",
+                    rate,
+                    "events/s",
+                    target,
+                    rate >= BUSY_TARGET if beside else None,
+                )
+            )
+        ratio = busy["shipped, beside a busy thread"] / busy["one row a statement, beside a busy thread"]
+        rows.append(Row("events", "store beside a busy thread: shipped / one row a statement", ratio, "x"))
     emit(rows)
 
 

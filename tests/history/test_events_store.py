@@ -17,7 +17,7 @@ from prometheus_client.registry import CollectorRegistry
 
 from overseer.history.metrics import EventsCollector
 from overseer.history.query import EventQuery, decode_cursor
-from overseer.history.store import EventStore, EventsUnavailable, StoreSettings
+from overseer.history.store import MAX_ROWS_PER_STATEMENT, EventStore, EventsUnavailable, StoreSettings
 from overseer.levels import Level
 from overseer.model.events import Event
 
@@ -107,6 +107,42 @@ def test_queued_events_are_written_in_batches_by_the_writer_thread(tmp_path: Pat
     assert connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     ids = [row[0] for row in connection.execute("SELECT id FROM events ORDER BY time")]
     assert ids == list(range(1, 5001))
+
+
+def test_a_batch_is_written_thousands_of_events_a_statement_with_its_ids_and_values_in_order(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Each statement lets go of the interpreter lock and waits for it back: one a row was ~200 rows a
+    # second while another thread kept the interpreter busy (the ingest when a fleet is first heard).
+    store = EventStore(settings(tmp_path / "events.db", log_events=True))
+    store.add([level_event(0.0)])
+    store.flush()  # ids go on from the last one given out
+    inserts: list[str] = []
+    assert store._writer is not None
+    store._writer.set_trace_callback(lambda sql: inserts.append(sql) if sql.startswith("INSERT") else None)
+    count = 2 * MAX_ROWS_PER_STATEMENT + 7
+    events = [
+        Event(
+            1000.0 + i / 3,  # not exact in decimal: each time comes back bit for bit
+            f"robot{i % 13}",
+            "appeared" if i % 2 else "level",
+            f"/Sensors/Sensor {i}",
+            HOSTILE[i % len(HOSTILE)],
+            None if i % 2 else Level.OK,
+            Level(i % 4),
+            f"message {i}",
+            tuple((f"key {k}", f"{HOSTILE[(i + k) % len(HOSTILE)]} {i}") for k in range(i % 4)),
+        )
+        for i in range(count)
+    ]
+    store.add(events)
+    with caplog.at_level(logging.INFO, logger="overseer.events"):
+        assert store.flush() == count
+    assert len(inserts) == 3
+    stored = list(reversed(everything(store, EventQuery(since=1000.0, limit=5000))))
+    assert stored == [event.document(event_id) for event_id, event in enumerate(events, start=2)]
+    logged = [r.event for r in caplog.records if r.name == "overseer.events"]  # type: ignore[attr-defined]
+    assert logged == stored
 
 
 def test_pages_are_newest_first_and_the_cursor_loses_nothing_even_at_equal_times(tmp_path: Path) -> None:
