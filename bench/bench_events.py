@@ -14,16 +14,16 @@ Realistic: 50 level changes a second in the fleet (one component in a thousand),
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import gc
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bench.common import Row, emit
+from bench.common import Row, busy_interpreter, emit
 from overseer.history.query import EventQuery
 from overseer.history.store import EventStore, StoreSettings
 from overseer.levels import Level
@@ -271,23 +271,11 @@ def busy_interpreter_figures(directory: Path) -> dict[str, float]:
 
 
 def _events_a_second(write: Callable[[int, int], None], first: int, count: int, busy: bool) -> float:
-    """Events a wall-clock second `write(first, count)` stores, with a thread spinning beside it if `busy`."""
-    stop = threading.Event()
-
-    def spin() -> None:  # pure Python that never waits, as the ingest when samples queue up
-        while not stop.is_set():
-            sum(range(100))
-
-    spinner = threading.Thread(target=spin, daemon=True)
-    if busy:
-        spinner.start()
-    started = time.perf_counter()
-    write(first, count)
-    elapsed = time.perf_counter() - started
-    stop.set()
-    if busy:
-        spinner.join()
-    return count / elapsed
+    """Events a wall-clock second `write(first, count)` stores, beside a busy thread if `busy`."""
+    with busy_interpreter() if busy else contextlib.nullcontext():
+        started = time.perf_counter()
+        write(first, count)
+        return count / (time.perf_counter() - started)
 
 
 def first_message_events(statuses: tuple[DiagnosticStatus, ...]) -> float:

@@ -6,8 +6,9 @@ import contextlib
 import json
 import os
 import sys
+import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from typing import TextIO
 
@@ -137,3 +138,25 @@ def tree_resident_bytes(pid: int) -> int:
         with contextlib.suppress(OSError, ValueError):
             total += resident_bytes(member)
     return total
+
+
+@contextlib.contextmanager
+def busy_interpreter() -> Iterator[None]:
+    """A thread running pure Python that never waits, as the ingest does while samples queue up.
+
+    Whatever lets go of the interpreter lock meanwhile (a socket send, an SQLite statement) waits up to
+    the switch interval (5 ms) to take it back: what is measured beside it counts those waits.
+    """
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            sum(range(100))
+
+    spinner = threading.Thread(target=spin, name="busy-interpreter", daemon=True)
+    spinner.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        spinner.join()

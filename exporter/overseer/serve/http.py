@@ -199,11 +199,17 @@ class _TimedStream(io.RawIOBase):
         return self._sock.recv_into(buffer)
 
     def write(self, data: ReadableBuffer) -> int:
-        """Send all of `data` before the deadline."""
+        """Send all of `data` before the deadline.
+
+        Each send hands the kernel all that is left, so it takes as much as the socket's buffer holds:
+        every send lets go of the interpreter lock and, while another thread keeps the interpreter busy
+        (the ingest), waits up to 5 ms to take it back, so sends of 64 kB each made a 20 MB answer take
+        1.8 s instead of 0.15 s.
+        """
         view = memoryview(data).cast("B")
         while view:
             self._sock.settimeout(self._left())
-            view = view[self._sock.send(view[:65536]) :]
+            view = view[self._sock.send(view) :]
         return len(memoryview(data).cast("B"))
 
     def _left(self) -> float:
