@@ -58,12 +58,19 @@ CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
 
 
-def received(url: str, transport: str) -> float:
-    """overseer_messages_total{result="received"} over `transport`."""
+def counted(url: str, transport: str) -> tuple[float, float, float]:
+    """Messages received over `transport`, events written and events dropped, from one `/metrics`."""
     with urllib.request.urlopen(url + "/metrics", timeout=300) as response:
         text = response.read().decode()
-    match = re.search(rf'overseer_messages_total\{{result="received",transport="{transport}"\}} (\S+)', text)
-    return float(match.group(1)) if match else 0.0
+
+    def total(pattern: str) -> float:
+        return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
+
+    return (
+        total(rf'overseer_messages_total\{{result="received",transport="{transport}"\}}'),
+        total("overseer_events_written_total"),
+        total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
+    )
 
 
 def scrape(url: str) -> tuple[float, int]:
@@ -280,7 +287,8 @@ def run(
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
-        got = received(exporter.url, transport) - (probe.published if probe else 0)
+        got, events_written, events_dropped = counted(exporter.url, transport)
+        got -= probe.published if probe else 0
         rss = tree_resident_bytes(pid)
         scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
     lost = max(0.0, figures.published - got)
@@ -296,6 +304,8 @@ def run(
             if wires.router
             else []
         ),
+        Row("scale", f"{label}: events written", events_written, "events"),
+        Row("scale", f"{label}: events dropped", events_dropped, "events", "0", events_dropped == 0),
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
         *(probe.rows(label) if probe else []),
