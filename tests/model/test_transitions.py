@@ -311,6 +311,38 @@ def test_forgotten_components_and_robots_expire() -> None:
     assert [e.kind for e in robot2] == ["robot_down", "expired"]
 
 
+def test_a_robot_forgotten_and_heard_again_before_the_next_check_expires_then_comes_up_anew() -> None:
+    fleet = started_fleet()
+    fleet.publish("robot2", (2, "/x", "broken"))
+    fleet.check()
+    fleet.take()
+    for _ in range(int(EXPIRE_AFTER) + 2):
+        fleet.advance(1)
+        fleet.publish("robot1", (0, "/a", "ok"), (0, "/b", "ok"))
+        fleet.check()
+    assert [e.kind for e in fleet.take() if e.robot == "robot2"] == ["robot_down"]
+    fleet.model.expire()
+    forgotten_at = fleet.clock.now
+    fleet.advance(0.5)
+    fleet.publish("robot2", (0, "/x", "fine"))  # within the same second: the detector never saw it gone
+    fleet.check()
+    robot2 = [e for e in fleet.take() if e.robot == "robot2"]
+    assert [(e.kind, e.component) for e in robot2] == [
+        ("appeared", "/x"),
+        ("expired", None),
+        ("robot_up", None),
+    ]
+    appeared, expired, up = robot2
+    assert expired.time == forgotten_at and expired.message == "forgotten after 60 s of silence"
+    assert appeared.old_level is None and appeared.new_level is Level.OK
+    assert (up.old_level, up.new_level, up.message) == (None, Level.OK, "first diagnostics received")
+    assert up.time == fleet.clock.now
+    fleet.advance(1)
+    fleet.publish("robot2", (0, "/x", "fine"))
+    fleet.check()
+    assert [e for e in fleet.take() if e.robot == "robot2"] == []
+
+
 def test_a_robot_known_but_never_heard_is_no_event_until_its_first_message() -> None:
     fleet = Fleet()
     assert fleet.model.register("robot1", "dds")

@@ -43,6 +43,7 @@ class _Seen:
     every second that doubled the cost of applying messages.
     """
 
+    discovered_at: float  # which robot of that name: one forgotten and followed again is another
     heard: bool
     up: bool
     up_since: float  # the robot's run of messages at the last check (it starts anew after being down)
@@ -89,7 +90,12 @@ class TransitionDetector:
         for robot in snapshot.robots:
             before = seen.get(robot.name)
             up = robot_up(robot)
-            if before is None:
+            if before is None or before.discovered_at != robot.discovered_at:
+                if before is not None:  # forgotten and followed again since the last check: it ended
+                    known += 1
+                    ended = self._forgotten(snapshot, robot.name, before.heard)
+                    if ended is not None:
+                        events.append(ended)
                 before = seen[robot.name] = _first_seen(robot, up)
             else:
                 known += 1
@@ -250,8 +256,8 @@ def _first_seen(robot: RobotState, up: bool) -> _Seen:
     event says it came up, and its next message continues its run or begins a new one as it would have.
     """
     if robot.last_message is not None and not robot.feeds:
-        return _Seen(True, up, robot.up_since, robot.last_message, -1, None, {})
-    return _Seen(False, False, -1.0, 0.0, -1, None, {})
+        return _Seen(robot.discovered_at, True, up, robot.up_since, robot.last_message, -1, None, {})
+    return _Seen(robot.discovered_at, False, False, -1.0, 0.0, -1, None, {})
 
 
 def _reported_worst(components: Mapping[ComponentKey, Component]) -> Level:
