@@ -25,7 +25,7 @@ from typing import Any
 
 from bench.common import Row, busy_interpreter, emit
 from overseer.history.query import EventQuery
-from overseer.history.store import EventStore, StoreSettings
+from overseer.history.store import EventStore, StoreSettings, insert_statement
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
@@ -42,10 +42,6 @@ WORST_SECONDS = 6
 FIRST_MESSAGE_TARGET_US = 50
 BUSY_EVENTS, BUSY_BATCH = 100_000, 10_000
 BUSY_TARGET = 50_000  # events a second beside a busy thread: 10,000 robots' 500,000 `appeared` in 10 s
-_ONE_ROW_INSERT = (
-    "INSERT INTO events (time, robot, kind, component, hardware_id, old_level, new_level, message,"
-    " key_values) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)"
-)
 
 
 class FleetClock:
@@ -258,7 +254,7 @@ def busy_interpreter_figures(directory: Path) -> dict[str, float]:
         assert writer is not None
         rows = [(*event[:5], None, int(Level.OK), event.message, "[]") for event in batch(first, count)]
         writer.execute("BEGIN IMMEDIATE")
-        writer.executemany(_ONE_ROW_INSERT, rows)
+        writer.executemany(insert_statement(1), rows)
         writer.execute("COMMIT")
 
     figures = {"shipped, alone": _events_a_second(shipped, 0, BUSY_EVENTS, busy=False)}

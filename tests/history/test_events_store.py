@@ -112,7 +112,7 @@ def test_queued_events_are_written_in_batches_by_the_writer_thread(tmp_path: Pat
 def test_a_batch_is_written_thousands_of_events_a_statement_with_its_ids_and_values_in_order(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    # Each statement lets go of the interpreter lock and waits for it back: one a row was ~200 rows a
+    # Each statement lets go of the interpreter lock and waits for it back: one a row wrote under 1,000 a
     # second while another thread kept the interpreter busy (the ingest when a fleet is first heard).
     store = EventStore(settings(tmp_path / "events.db", log_events=True))
     store.add([level_event(0.0)])

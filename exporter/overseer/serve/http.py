@@ -203,8 +203,8 @@ class _TimedStream(io.RawIOBase):
 
         Each send hands the kernel all that is left, so it takes as much as the socket's buffer holds:
         every send lets go of the interpreter lock and, while another thread keeps the interpreter busy
-        (the ingest), waits up to 5 ms to take it back, so sends of 64 kB each made a 20 MB answer take
-        1.8 s instead of 0.15 s.
+        (the ingest), waits up to 5 ms to take it back: sends of 64 kB each made a 20 MB answer take
+        1.8 s beside a busy thread, against 0.35 s now (0.15 s alone).
         """
         view = memoryview(data).cast("B")
         while view:
