@@ -28,6 +28,7 @@ BENCHMARKS = (
     "bench.bench_alert_rules",
     "bench.bench_inventory",
     "bench.bench_first_look",
+    "bench.bench_collector",
     "bench.bench_scale",
     "bench.bench_rules_at_scale",
 )

@@ -35,20 +35,23 @@ TARGET_RATIO = 1.5
 
 
 @dataclass(frozen=True)
-class _Bytes:
+class SampleBytes:
+    """What the Zenoh source reads of a `zenoh.ZBytes`."""
+
     data: bytes
 
     def to_bytes(self) -> bytes:
+        """The bytes, as Zenoh hands them over."""
         return self.data
 
 
 @dataclass(frozen=True)
-class _Sample:
+class ZenohSample:
     """What the Zenoh source reads of a `zenoh.Sample`."""
 
     key_expr: str
-    payload: _Bytes
-    attachment: _Bytes
+    payload: SampleBytes
+    attachment: SampleBytes
 
 
 def zenoh_first_arrays(robots: int) -> float:
@@ -61,7 +64,9 @@ def zenoh_first_arrays(robots: int) -> float:
         token = publisher_token(0, "1f", index, name, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
         gid = publisher_gid(token)
         key = data_key(0, name, AGGREGATED)
-        samples.append(_Sample(key, _Bytes(bytes(payloads[index])), _Bytes(attachment(1, 0, gid))))
+        samples.append(
+            ZenohSample(key, SampleBytes(bytes(payloads[index])), SampleBytes(attachment(1, 0, gid)))
+        )
     on_data: Callable[[Any], None] = source._on_data  # handed what it reads of a zenoh.Sample
     return _timed_tail([partial(on_data, sample) for sample in samples])
 

@@ -11,6 +11,7 @@ from overseer.commands import Command
 from overseer.commands.signals import wait_for_signal
 from overseer.config import load_config
 from overseer.config.web import DEFAULT_PORT
+from overseer.garbage_collection import collect_in_large_batches
 from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
@@ -38,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo until SIGTERM or SIGINT."""
+    collect_in_large_batches()
     config = load_config(
         None,
         {

@@ -20,6 +20,7 @@ from overseer.fleet.documents import ComponentQuery
 from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.workers.merge import portable_robots
+from overseer.garbage_collection import collect_in_large_batches
 from overseer.log_format import configure_logging
 from overseer.model.events import Event
 
@@ -80,6 +81,7 @@ def run_worker(
     hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
     worker left behind by a dead exporter would hold its robots' readers for good.
     """
+    collect_in_large_batches()
     status = 1
     try:
         status = _serve(config, worker, workers, requests, events, start)
