@@ -27,7 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bench.bench_first_look import SampleBytes, ZenohSample
+from bench.bench_first_look import SampleBytes, ZenohSample, aggregator_addresses
 from bench.common import Row, emit
 from bench.loadgen_payloads import Fleet, FleetShape
 from overseer.config.zenoh import ZenohConfig
@@ -35,9 +35,6 @@ from overseer.garbage_collection import collect_in_large_batches
 from overseer.history.store import EventStore, StoreSettings
 from overseer.model import FleetLimits, FleetModel
 from overseer.model.transitions import TransitionDetector
-from overseer.simulator.zenoh_publisher import attachment
-from overseer.sources.topic_names import AGGREGATED
-from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
 from overseer.sources.zenoh.source import ZenohSource
 
 DEFAULT, TUNED = "Python's default thresholds", "the exporter's thresholds"
@@ -83,20 +80,14 @@ def measure(robots: int, seconds: int, tuned: bool) -> dict[str, float]:
     detector = TransitionDetector(model.limits, store.add)
     model.set_level_listener(detector.on_level_changes)
     on_data: Callable[[Any], None] = ZenohSource(ZenohConfig(enabled=True), model)._on_data  # what it reads
-    keys, attachments = [], []
-    for index in range(robots):
-        name = f"robot{index:05d}"
-        token = publisher_token(0, "1f", index, name, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
-        keys.append(data_key(0, name, AGGREGATED))
-        attachments.append(SampleBytes(attachment(1, 0, publisher_gid(token))))
+    addresses = aggregator_addresses(robots)
 
     def fleet_second(second: int) -> None:
         fleet.advance(float(second))
         stamp = _STAMP.pack(second, 0)
-        for index in range(robots):
-            payload = fleet.payloads[index]
+        for (key, robot_attachment), payload in zip(addresses, fleet.payloads, strict=True):
             payload[4:12] = stamp
-            on_data(ZenohSample(keys[index], SampleBytes(bytes(payload)), attachments[index]))
+            on_data(ZenohSample(key, SampleBytes(bytes(payload)), robot_attachment))
         clock[0] += 1.0
         detector.check(model.snapshot())
         store.flush()
@@ -144,12 +135,12 @@ def main() -> None:
 
 def rows(robots: int, results: dict[str, list[dict[str, float]]]) -> list[Row]:
     """Each setting's best run (least steady CPU), and the ratio of the two."""
-    rows = []
+    table = []
     best = {label: min(runs, key=lambda run: run["steady_us"]) for label, runs in results.items()}
     for label, run in best.items():
         prefix = f"{robots:,} robots x 50, {label}"
         worst_pause = max(r["longest"] for r in results[label])
-        rows += [
+        table += [
             Row("collector", f"{prefix}: a robot's first array", run["first_us"], "µs"),
             Row("collector", f"{prefix}: of which the collector", run["first_collector_us"], "µs"),
             Row("collector", f"{prefix}: a steady message", run["steady_us"], "µs"),
@@ -164,8 +155,8 @@ def rows(robots: int, results: dict[str, list[dict[str, float]]]) -> list[Row]:
             ),
         ]
     ratio = best[TUNED]["steady_us"] / best[DEFAULT]["steady_us"]
-    rows.append(Row("collector", f"{robots:,} robots: a steady message, tuned / default", ratio, "x"))
-    return rows
+    table.append(Row("collector", f"{robots:,} robots: a steady message, tuned / default", ratio, "x"))
+    return table
 
 
 if __name__ == "__main__":

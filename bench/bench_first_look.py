@@ -54,19 +54,24 @@ class ZenohSample:
     attachment: SampleBytes
 
 
+def aggregator_addresses(robots: int) -> list[tuple[str, SampleBytes]]:
+    """Each robot's key and attachment as its aggregator publishes on rmw_zenoh (robot00000 ... first)."""
+    addresses = []
+    for index in range(robots):
+        name = f"robot{index:05d}"
+        token = publisher_token(0, "1f", index, name, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
+        addresses.append((data_key(0, name, AGGREGATED), SampleBytes(attachment(1, 0, publisher_gid(token)))))
+    return addresses
+
+
 def zenoh_first_arrays(robots: int) -> float:
     """Seconds a robot for the last `MEASURED` of `robots` robots' first arrays through the Zenoh source."""
     payloads = Fleet(FleetShape(robots)).payloads
     source = ZenohSource(ZenohConfig(enabled=True), FleetModel(FleetLimits(max_robots=2 * robots)))
-    samples = []
-    for index in range(robots):
-        name = f"robot{index:05d}"
-        token = publisher_token(0, "1f", index, name, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
-        gid = publisher_gid(token)
-        key = data_key(0, name, AGGREGATED)
-        samples.append(
-            ZenohSample(key, SampleBytes(bytes(payloads[index])), SampleBytes(attachment(1, 0, gid)))
-        )
+    samples = [
+        ZenohSample(key, SampleBytes(bytes(payload)), robot_attachment)
+        for (key, robot_attachment), payload in zip(aggregator_addresses(robots), payloads, strict=True)
+    ]
     on_data: Callable[[Any], None] = source._on_data  # handed what it reads of a zenoh.Sample
     return _timed_tail([partial(on_data, sample) for sample in samples])
 
