@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import gc
+import logging
+import os
 import weakref
 from collections.abc import Iterator
 from typing import Any
@@ -10,6 +12,8 @@ from typing import Any
 import pytest
 
 from overseer.cli import main
+from overseer.config import Config
+from overseer.fleet.workers import process as worker_process
 from overseer.garbage_collection import YOUNG_THRESHOLD, collect_in_large_batches
 
 
@@ -89,3 +93,23 @@ def test_overseer_demo_sets_the_thresholds(thresholds: None, capsys: pytest.Capt
     assert main(["demo", "--web.listen-address", "no port here"]) == 2
     assert "listen" in capsys.readouterr().err
     assert gc.get_threshold()[0] == YOUNG_THRESHOLD
+
+
+def test_an_ingest_worker_sets_the_thresholds_before_it_serves_with_serving_and_exit_stubbed(
+    thresholds: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The worker's serving is replaced by a record of the thresholds it would serve with, and its exit
+    # (which would end this test's process) by a record of the status.
+    served_with: list[int] = []
+    exits: list[int] = []
+
+    def serve(*_: object) -> int:
+        served_with.append(gc.get_threshold()[0])
+        return 0
+
+    monkeypatch.setattr(worker_process, "_serve", serve)
+    monkeypatch.setattr(os, "_exit", exits.append)
+    monkeypatch.setattr(logging, "shutdown", lambda: None)  # pytest's own handlers stay open
+    worker_process.run_worker(Config(), 0, 2, None, None)  # type: ignore[arg-type]
+    assert served_with == [YOUNG_THRESHOLD]
+    assert exits == [0]
