@@ -36,6 +36,7 @@ import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
@@ -58,16 +59,29 @@ CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
 
 
-def counted(url: str, transport: str) -> tuple[float, float, float]:
-    """Messages received over `transport`, events written and events dropped, from one `/metrics`."""
+class Counts(NamedTuple):
+    """What the exporter counted, from one `/metrics`."""
+
+    received: float  # messages over the transport
+    lost: float  # samples its robots published that it says it never heard (Zenoh's sequence numbers)
+    events_written: float
+    events_dropped: float
+
+
+def counted(url: str, transport: str) -> Counts:
+    """Messages received and lost over `transport`, events written and events dropped."""
     with urllib.request.urlopen(url + "/metrics", timeout=300) as response:
         text = response.read().decode()
 
     def total(pattern: str) -> float:
         return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
 
-    return (
-        total(rf'overseer_messages_total\{{result="received",transport="{transport}"\}}'),
+    def messages(result: str) -> float:
+        return total(rf'overseer_messages_total\{{result="{result}",transport="{transport}"\}}')
+
+    return Counts(
+        messages("received"),
+        messages("lost"),
         total("overseer_events_written_total"),
         total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
     )
@@ -287,8 +301,8 @@ def run(
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
-        got, events_written, events_dropped = counted(exporter.url, transport)
-        got -= probe.published if probe else 0
+        counts = counted(exporter.url, transport)
+        got = counts.received - (probe.published if probe else 0)
         rss = tree_resident_bytes(pid)
         scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
     lost = max(0.0, figures.published - got)
@@ -296,6 +310,7 @@ def run(
     return [
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
+        Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
         Row("scale", f"{label}: exporter memory a component", rss / (robots * COMPONENTS), "bytes"),
@@ -304,8 +319,15 @@ def run(
             if wires.router
             else []
         ),
-        Row("scale", f"{label}: events written", events_written, "events"),
-        Row("scale", f"{label}: events dropped", events_dropped, "events", "0", events_dropped == 0),
+        Row("scale", f"{label}: events written", counts.events_written, "events"),
+        Row(
+            "scale",
+            f"{label}: events dropped",
+            counts.events_dropped,
+            "events",
+            "0",
+            counts.events_dropped == 0,
+        ),
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
         *(probe.rows(label) if probe else []),

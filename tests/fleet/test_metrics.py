@@ -9,7 +9,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from overseer.codec import compiled
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
-from overseer.fleet.metric_values import numeric_value
+from overseer.fleet.metric_values import message_counts, numeric_value
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import Expectation, FleetLimits, FleetModel, Inventory, ListedRobot
@@ -422,3 +422,11 @@ def test_external_url_is_exported_for_alert_links_only_when_configured() -> None
     assert info == 1
     plain, _, _ = fleet_rendering(PAPER_FLEET)
     assert "overseer_web_info{" not in plain.fast().decode()
+
+
+def test_every_transport_shows_each_result_at_zero_and_zenoh_its_lost_samples_too() -> None:
+    counts = dict(message_counts({("zenoh", "lost"): 3, ("dds", "received"): 2}, ["dds", "zenoh"]))
+    assert counts[("zenoh", "lost")] == 3
+    assert counts[("zenoh", "received")] == counts[("zenoh", "dropped")] == counts[("dds", "dropped")] == 0
+    assert counts[("dds", "received")] == 2
+    assert ("dds", "lost") not in counts  # DDS samples are not numbered here: nothing can be counted lost

@@ -101,7 +101,7 @@ STATUS_MESSAGE = MetricFamily(
 MESSAGES = MetricFamily(
     "overseer_messages",
     "counter",
-    "Diagnostics messages by transport and result: received, decode_error or dropped.",
+    "Diagnostics messages by transport and result: received, decode_error, dropped or lost.",
     ("transport", "result"),
 )
 STATUSES_DROPPED = MetricFamily(

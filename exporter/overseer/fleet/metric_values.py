@@ -7,6 +7,7 @@ import re
 from collections.abc import Iterable, Iterator, Mapping
 
 MESSAGE_RESULTS = ("received", "decode_error", "dropped")
+NUMBERED_TRANSPORTS = ("zenoh",)  # whose samples carry sequence numbers: one never heard counts as "lost"
 DROP_REASONS = ("robot_limit", "component_limit", "feed_limit", "value_limit", "invalid_level")
 
 _LEADING_NUMBER = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
@@ -57,6 +58,6 @@ def message_counts(
     """Message counts by (transport, result), with zeros for every result of the active transports."""
     counts = dict(counted)
     for transport in transports:
-        for result in MESSAGE_RESULTS:
+        for result in MESSAGE_RESULTS + (("lost",) if transport in NUMBERED_TRANSPORTS else ()):
             counts.setdefault((transport, result), 0)
     return sorted(counts.items())

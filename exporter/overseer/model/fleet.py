@@ -127,10 +127,10 @@ class FleetModel:
         with self._lock:
             self._source_errors[(transport, reason)] += 1
 
-    def count_message(self, transport: str, result: str) -> None:
-        """Count one message by its result (received, decode_error, dropped)."""
+    def count_message(self, transport: str, result: str, count: int = 1) -> None:
+        """Count `count` messages by their result (received, decode_error, dropped, lost)."""
         with self._lock:
-            self._message_counts[(transport, result)] += 1
+            self._message_counts[(transport, result)] += count
 
     def register(self, robot: str, transport: str) -> bool:
         """Make a discovered robot known before its first message; False when the robot cap is reached."""

@@ -19,7 +19,14 @@ from zenoh.ext import Int64, UInt8, z_deserialize
 
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, DIAGNOSTIC_ARRAY_TYPE, data_key
+from overseer.simulator.zenoh_publisher import attachment
+from overseer.sources.zenoh.keys import (
+    DIAGNOSTIC_ARRAY_HASH,
+    DIAGNOSTIC_ARRAY_TYPE,
+    data_key,
+    publisher_gid,
+    publisher_token,
+)
 from testbed.nagios import run_check
 from testbed.ports import free_port
 from testbed.processes import Exporter, running_exporter, running_simulator, wait_for
@@ -233,6 +240,55 @@ def test_hostile_keys_and_payloads_are_counted_and_the_exporter_keeps_serving(tm
         names = {r["robot"] for r in exporter.get_json("/api/v1/robots")["robots"]}
         assert not names & {"robot9", "wei rd☃/ns", "caf\u00e9-robot", "0", "domain0"}
         assert exporter.get("/-/healthy") and exporter.process.poll() is None
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_samples_a_publisher_numbered_and_the_exporter_never_heard_are_counted_lost(
+    tmp_path: Path, workers: int
+) -> None:
+    payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/a", "ok", "", ()),)))
+
+    def counted(result: str) -> float:
+        return metric(exporter, "overseer_messages_total", transport="zenoh", result=result) or 0
+
+    with (
+        running_router(tmp_path) as port,
+        running_exporter(tmp_path, None, *exporter_args(port, f"--ingest.workers={workers}")) as exporter,
+        client_session(port) as session,
+    ):
+        wait_for(lambda: session.info.routers_zid(), 10, message="test session connected")
+        token = publisher_token(
+            0, str(session.zid()), 10, "lossy", "aggregator", "diagnostics_agg", DIAGNOSTIC_ARRAY_HASH
+        )
+        session.liveliness().declare_token(token)
+        gid, key, numbers = publisher_gid(token), data_key(0, "lossy", "diagnostics_agg"), [0]
+
+        def put(number: int) -> None:
+            numbers[0] = number
+            session.put(key, payload, attachment=attachment(number, time.time_ns(), gid))
+
+        def settled() -> float | None:
+            before = counted("received")
+            time.sleep(0.5)
+            return before if counted("received") == before else None
+
+        def put_next_until_heard() -> bool:
+            put(numbers[0] + 1)
+            return counted("received") > 0  # the robot is known from its token alone: wait for a sample
+
+        # Numbered one by one, as rmw_zenoh does, until a worker follows the robot: what it did not hear
+        # before then is not a gap (nothing was heard to measure from).
+        wait_for(put_next_until_heard, 30, interval=0.1, message="the numbered publisher heard")
+        received = wait_for(settled, 10, message="the samples put meanwhile all heard")
+        assert counted("lost") == 0
+        put(numbers[0] + 6)  # five never sent on: lost on the way
+        put(numbers[0] + 1)
+        wait_for(lambda: counted("received") == received + 2, 10, message="the two samples after the gap")
+        assert counted("lost") == 5
+        put(1)  # the publisher started over
+        put(2)
+        wait_for(lambda: counted("received") == received + 4, 10, message="the restarted publisher's samples")
+        assert counted("lost") == 5
 
 
 def test_the_simulator_sends_rmw_zenoh_attachment_and_liveliness_tokens(tmp_path: Path) -> None:

@@ -18,6 +18,7 @@ from overseer.sources.zenoh.keys import (
     DiagnosticsKey,
     RejectedKey,
     attachment_gid,
+    attachment_sequence,
     bridge_key,
     bridge_publisher_token,
     data_key,
@@ -194,3 +195,28 @@ def test_a_publisher_token_names_its_node_and_its_gid_is_the_tokens_hash() -> No
 )
 def test_the_attachment_gives_its_publishers_gid(raw: bytes | None, expected: bytes | None) -> None:
     assert attachment_gid(raw) == expected
+
+
+@pytest.mark.parametrize(
+    ("raw", "expected"),
+    [
+        (attachment(41, 1_700_000_000_000_000_000, bytes(range(16))), 41),  # Jazzy: 33 bytes
+        (attachment(2**40 + 3, 0, bytes(range(16))), 2**40 + 3),
+        (  # an earlier rmw_zenoh named its fields
+            b"\x0fsequence_number"
+            + (7).to_bytes(8, "little")
+            + b"\x10source_timestamp"
+            + bytes(8)
+            + b"\x0asource_gid\x10"
+            + bytes(range(16)),
+            7,
+        ),
+        (None, None),
+        (b"", None),
+        (bytes(33), None),  # not rmw_zenoh's: no GID length where it belongs
+        (b"\x0fsequence_number\x01\x02\x0asource_gid" + bytes(16), None),  # the number cut short
+        (b"\x0asource_gid" + bytes(16), None),  # a GID and no number
+    ],
+)
+def test_the_attachment_gives_its_samples_sequence_number(raw: bytes | None, expected: int | None) -> None:
+    assert attachment_sequence(raw) == expected

@@ -16,6 +16,7 @@ diagnostic_updater node publishes on, tells whose node (whose namespace) sent it
 from __future__ import annotations
 
 import re
+import struct
 from typing import NamedTuple
 
 import xxhash
@@ -150,6 +151,24 @@ def attachment_gid(attachment: bytes | None) -> bytes | None:
     if len(rest) == _GID_SIZE + 1 and rest[0] == _GID_SIZE:
         return rest[1:]
     return rest if len(rest) == _GID_SIZE else None
+
+
+_NAMED_SEQUENCE = b"\x0fsequence_number"
+_NAMED_TIMESTAMP = b"\x10source_timestamp"
+_SEQUENCE = struct.Struct("<q")
+
+
+def attachment_sequence(attachment: bytes | None) -> int | None:
+    """The sequence number of an rmw_zenoh sample (one more at each publication), or None."""
+    if attachment is None or attachment_gid(attachment) is None:
+        return None
+    if len(attachment) == ATTACHMENT_SIZE:
+        return int(_SEQUENCE.unpack_from(attachment)[0])
+    at = attachment.find(_NAMED_SEQUENCE) + len(_NAMED_SEQUENCE)
+    after = at + _SEQUENCE.size
+    if at < len(_NAMED_SEQUENCE) or attachment[after : after + len(_NAMED_TIMESTAMP)] != _NAMED_TIMESTAMP:
+        return None  # no number, or not followed by the field that comes next
+    return int(_SEQUENCE.unpack_from(attachment, at)[0])
 
 
 def parse_publisher_token(key: str, domain: int) -> DiagnosticsKey | None:

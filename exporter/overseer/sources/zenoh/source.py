@@ -49,6 +49,7 @@ from overseer.sources.zenoh.keys import (
     DiagnosticsKey,
     RejectedKey,
     attachment_gid,
+    attachment_sequence,
     bridge_liveliness_subscription,
     data_subscriptions,
     followed_subscription,
@@ -58,6 +59,7 @@ from overseer.sources.zenoh.keys import (
     parse_publisher,
     unnamespaced_subscriptions,
 )
+from overseer.sources.zenoh.sequence_gaps import SequenceGaps
 from overseer.sources.zenoh.session import session_config
 
 log = logging.getLogger(__name__)
@@ -115,6 +117,7 @@ class ZenohSource:
         self._foreign: set[str] = set()
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
+        self._gaps = SequenceGaps()  # by feed, as `_ingests`: what each publisher sent and we never heard
         self._unattributed: dict[bytes, _Unattributed] = {}
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
@@ -292,8 +295,8 @@ class ZenohSource:
             if parsed.key_format == RMW_ZENOH and parsed.type_hash != DIAGNOSTIC_ARRAY_HASH:
                 # Another revision of the message: read anyway (the codec checks every byte), but say so.
                 self._model.count_source_error(TRANSPORT, "type_hash_mismatch")
-            attachment = sample.attachment
-            gid = attachment_gid(None if attachment is None else attachment.to_bytes()) or b""
+            attachment = None if sample.attachment is None else sample.attachment.to_bytes()
+            gid = attachment_gid(attachment) or b""
             payload = sample.payload.to_bytes()
             if robot is None:
                 robot = self._publishers.get(gid) if gid else self._naming.unnamespaced_robot
@@ -304,6 +307,11 @@ class ZenohSource:
                     return
             ingest = self._ingest_for(robot, parsed, gid)
             if ingest is not None:
+                sequence = attachment_sequence(attachment) if gid else None
+                if sequence is not None:
+                    missed = self._gaps.missed((robot, parsed.kind, gid), sequence)
+                    if missed:
+                        self._model.count_message(TRANSPORT, "lost", missed)
                 ingest(payload)
         except DecodeError as error:  # already counted by the ingest
             log.debug("undecodable sample on %s: %s", sample.key_expr, error)
@@ -429,6 +437,7 @@ class ZenohSource:
             for robot in [robot for robot in self._feeds_of if robot not in known]:
                 for feed in self._feeds_of.pop(robot):
                     del self._ingests[feed]
+                    self._gaps.forget(feed)
             for robot in [robot for robot in self._tokens if robot not in known]:
                 del self._tokens[robot]
             gone = [key for key, (robot, _) in self._followed.items() if robot not in known]
