@@ -285,10 +285,17 @@ def test_samples_a_publisher_numbered_and_the_exporter_never_heard_are_counted_l
         put(numbers[0] + 1)
         wait_for(lambda: counted("received") == received + 2, 10, message="the two samples after the gap")
         assert counted("lost") == 5
-        put(1)  # the publisher started over
+        highest = numbers[0]
+        put(1)  # stray numbers, lower than the highest heard: neither a loss nor where counting goes on from
         put(2)
-        wait_for(lambda: counted("received") == received + 4, 10, message="the restarted publisher's samples")
+        put(highest + 1)
+        wait_for(lambda: counted("received") == received + 5, 10, message="the stray samples")
         assert counted("lost") == 5
+        put(highest + 3)  # counted from the highest heard, not from the stray 2
+        wait_for(lambda: counted("received") == received + 6, 10, message="the sample after one more gap")
+        assert counted("lost") == 6
+        assert "6 samples of lossy's lossy/diagnostics_agg" not in exporter.log()  # 6 is no power of ten
+        assert "5 samples of lossy's lossy/diagnostics_agg" in exporter.log()  # the first loss, named
 
 
 def test_the_simulator_sends_rmw_zenoh_attachment_and_liveliness_tokens(tmp_path: Path) -> None:

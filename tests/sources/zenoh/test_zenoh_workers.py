@@ -9,10 +9,17 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
+from bench.bench_first_look import SampleBytes, ZenohSample
+from overseer.codec.cdr import encode_diagnostic_array
 from overseer.config.zenoh import ZenohConfig
+from overseer.messages import DiagnosticArray
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.simulator.zenoh_publisher import attachment
+from overseer.sources.topic_names import AGGREGATED
+from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
 from overseer.sources.zenoh.source import QUEUE_CAPACITY, ZenohSource
 from testbed.processes import running_simulator, wait_for
 from testbed.zenoh import endpoint, running_router, simulator_args
@@ -58,8 +65,24 @@ def test_each_worker_receives_only_the_samples_of_the_robots_it_owns(tmp_path: P
 def test_a_worker_whose_ingest_falls_behind_drops_and_counts_instead_of_growing() -> None:
     # Not started: nothing drains the queue, as when a flood outruns the ingest.
     model = FleetModel()
-    source = ZenohSource(ZenohConfig(enabled=True), model, Shard().for_worker(0, WORKERS))
+    shard = Shard().for_worker(0, WORKERS)
+    source = ZenohSource(ZenohConfig(enabled=True), model, shard)
+    robot = next(name for name in (f"robot{index}" for index in range(1, 100)) if shard.owns(name))
+    token = publisher_token(0, "1f", 10, robot, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
+    payload = SampleBytes(encode_diagnostic_array(DiagnosticArray(0, 0, "", ())))
+
+    def sample(number: int) -> Any:  # what the source reads of a zenoh.Sample, numbered as rmw_zenoh does
+        gid = publisher_gid(token)
+        return ZenohSample(data_key(0, robot, AGGREGATED), payload, SampleBytes(attachment(number, 0, gid)))
+
+    source._on_data(sample(1))  # heard: the publisher's numbering starts there
     handler = source._queued()  # the handler every subscription of a worker is declared with
-    for _ in range(QUEUE_CAPACITY + 5):
-        handler(object())  # type: ignore[arg-type]
+    for number in range(2, QUEUE_CAPACITY + 7):
+        handler(sample(number))
     assert model.snapshot().message_counts.get(("zenoh", "dropped")) == 5
+    while (queued := source._samples.get_nowait() if not source._samples.empty() else None) is not None:
+        source._on_data(queued)
+    source._on_data(sample(QUEUE_CAPACITY + 7))
+    counts = model.snapshot().message_counts
+    assert counts.get(("zenoh", "received")) == QUEUE_CAPACITY + 2
+    assert counts.get(("zenoh", "lost"), 0) == 0  # the five were heard, and counted dropped: not lost too

@@ -117,7 +117,7 @@ class ZenohSource:
         self._foreign: set[str] = set()
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
-        self._gaps = SequenceGaps()  # by feed, as `_ingests`: what each publisher sent and we never heard
+        self._gaps = SequenceGaps()  # by publisher GID: what each sent and this session never heard
         self._unattributed: dict[bytes, _Unattributed] = {}
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
@@ -241,6 +241,10 @@ class ZenohSource:
             self._samples.put(sample)
         else:  # the ingest is that far behind (a flood): drop and count rather than grow without bound
             self._model.count_message(TRANSPORT, "dropped")
+            attachment = None if sample.attachment is None else sample.attachment.to_bytes()
+            gid, sequence = attachment_gid(attachment), attachment_sequence(attachment)
+            if gid is not None and sequence is not None:
+                self._gaps.heard(gid, sequence)  # counted dropped: not lost as well
 
     def _drain_queue(self) -> None:
         """Hand every queued sample to `_on_data`, in batches, until `stop`."""
@@ -309,14 +313,28 @@ class ZenohSource:
             if ingest is not None:
                 sequence = attachment_sequence(attachment) if gid else None
                 if sequence is not None:
-                    missed = self._gaps.missed((robot, parsed.kind, gid), sequence)
-                    if missed:
-                        self._model.count_message(TRANSPORT, "lost", missed)
+                    self._count_lost(robot, parsed, gid, sequence)
                 ingest(payload)
         except DecodeError as error:  # already counted by the ingest
             log.debug("undecodable sample on %s: %s", sample.key_expr, error)
         except Exception:  # a callback from Zenoh's threads must never raise
             log.exception("failed to process diagnostics from %s", sample.key_expr)
+
+    def _count_lost(self, robot: str, parsed: DiagnosticsKey, gid: bytes, sequence: int) -> None:
+        """Count the samples a publisher sent before `sequence` and this session never heard."""
+        missed = self._gaps.missed(gid, sequence)
+        if missed:
+            self._model.count_message(TRANSPORT, "lost", missed)
+            lost, before = self._gaps.lost(gid), self._gaps.lost(gid) - missed
+            if not before or len(str(lost)) > len(str(before)):  # its first loss, then at each power of ten
+                log.warning(
+                    "%d samples of %s's %s (publisher %s) never heard so far: the router or the link "
+                    "dropped them, or this exporter could not keep up",
+                    lost,
+                    robot,
+                    parsed.topic,
+                    gid.hex(),
+                )
 
     def _hold(self, gid: bytes, parsed: DiagnosticsKey, payload: bytes) -> None:
         """Keep a sample of a publisher whose token (whose node) is not known yet."""
@@ -437,7 +455,7 @@ class ZenohSource:
             for robot in [robot for robot in self._feeds_of if robot not in known]:
                 for feed in self._feeds_of.pop(robot):
                     del self._ingests[feed]
-                    self._gaps.forget(feed)
+                    self._gaps.forget(feed[2])
             for robot in [robot for robot in self._tokens if robot not in known]:
                 del self._tokens[robot]
             gone = [key for key, (robot, _) in self._followed.items() if robot not in known]
