@@ -326,7 +326,11 @@ def test_zenoh_nodes_on_the_absolute_topic_are_robots_of_their_namespaces_with_o
             )
             seen = watch(exporter, "robot_a", 7)
             history = events(exporter, "robot_a")
+            messages = exporter.samples()["overseer_messages_total"]
         robots = {robot["robot"] for robot in exporter.get_json("/api/v1/robots")["robots"]}
     assert robots == set(expected)
     assert all(state == expected["robot_a"] for state in seen), seen
     assert not [e for e in history if e["kind"] in ("missing", "expired", "robot_down")], history
+    # The three nodes publish on the one key of /diagnostics, each numbering its own samples: none lost.
+    assert messages[(("result", "received"), ("transport", "zenoh"))] >= 20
+    assert messages[(("result", "lost"), ("transport", "zenoh"))] == 0

@@ -17,6 +17,7 @@ from overseer.sources.zenoh.keys import (
     RMW_ZENOH,
     DiagnosticsKey,
     RejectedKey,
+    attachment_fields,
     attachment_gid,
     attachment_sequence,
     bridge_key,
@@ -220,3 +221,18 @@ def test_the_attachment_gives_its_publishers_gid(raw: bytes | None, expected: by
 )
 def test_the_attachment_gives_its_samples_sequence_number(raw: bytes | None, expected: int | None) -> None:
     assert attachment_sequence(raw) == expected
+
+
+@pytest.mark.parametrize(
+    ("raw", "expected"),
+    [
+        (attachment(41, 5, bytes(range(16))), (bytes(range(16)), 41)),
+        (b"\x0asource_gid" + bytes(range(16)), (bytes(range(16)), None)),  # a GID and no number
+        (bytes(33), (None, None)),
+        (None, (None, None)),
+    ],
+)
+def test_one_reading_of_the_attachment_gives_its_gid_and_number_together(
+    raw: bytes | None, expected: tuple[bytes | None, int | None]
+) -> None:
+    assert attachment_fields(raw) == expected

@@ -158,17 +158,23 @@ _NAMED_TIMESTAMP = b"\x10source_timestamp"
 _SEQUENCE = struct.Struct("<q")
 
 
-def attachment_sequence(attachment: bytes | None) -> int | None:
-    """The sequence number of an rmw_zenoh sample (one more at each publication), or None."""
-    if attachment is None or attachment_gid(attachment) is None:
-        return None
+def attachment_fields(attachment: bytes | None) -> tuple[bytes | None, int | None]:
+    """The publisher GID and the sequence number of an rmw_zenoh sample, each None when not understood."""
+    gid = attachment_gid(attachment)
+    if gid is None or attachment is None:
+        return None, None
     if len(attachment) == ATTACHMENT_SIZE:
-        return int(_SEQUENCE.unpack_from(attachment)[0])
+        return gid, int(_SEQUENCE.unpack_from(attachment)[0])
     at = attachment.find(_NAMED_SEQUENCE) + len(_NAMED_SEQUENCE)
     after = at + _SEQUENCE.size
     if at < len(_NAMED_SEQUENCE) or attachment[after : after + len(_NAMED_TIMESTAMP)] != _NAMED_TIMESTAMP:
-        return None  # no number, or not followed by the field that comes next
-    return int(_SEQUENCE.unpack_from(attachment, at)[0])
+        return gid, None  # no number, or not followed by the field that comes next
+    return gid, int(_SEQUENCE.unpack_from(attachment, at)[0])
+
+
+def attachment_sequence(attachment: bytes | None) -> int | None:
+    """The sequence number of an rmw_zenoh sample (one more at each publication), or None."""
+    return attachment_fields(attachment)[1]
 
 
 def parse_publisher_token(key: str, domain: int) -> DiagnosticsKey | None:

@@ -48,8 +48,7 @@ from overseer.sources.zenoh.keys import (
     RMW_ZENOH,
     DiagnosticsKey,
     RejectedKey,
-    attachment_gid,
-    attachment_sequence,
+    attachment_fields,
     bridge_liveliness_subscription,
     data_subscriptions,
     followed_subscription,
@@ -242,7 +241,7 @@ class ZenohSource:
         else:  # the ingest is that far behind (a flood): drop and count rather than grow without bound
             self._model.count_message(TRANSPORT, "dropped")
             attachment = None if sample.attachment is None else sample.attachment.to_bytes()
-            gid, sequence = attachment_gid(attachment), attachment_sequence(attachment)
+            gid, sequence = attachment_fields(attachment)
             if gid is not None and sequence is not None:
                 self._gaps.heard(gid, sequence)  # counted dropped: not lost as well
 
@@ -300,7 +299,8 @@ class ZenohSource:
                 # Another revision of the message: read anyway (the codec checks every byte), but say so.
                 self._model.count_source_error(TRANSPORT, "type_hash_mismatch")
             attachment = None if sample.attachment is None else sample.attachment.to_bytes()
-            gid = attachment_gid(attachment) or b""
+            publisher, sequence = attachment_fields(attachment)
+            gid = publisher or b""
             payload = sample.payload.to_bytes()
             if robot is None:
                 robot = self._publishers.get(gid) if gid else self._naming.unnamespaced_robot
@@ -311,7 +311,6 @@ class ZenohSource:
                     return
             ingest = self._ingest_for(robot, parsed, gid)
             if ingest is not None:
-                sequence = attachment_sequence(attachment) if gid else None
                 if sequence is not None:
                     self._count_lost(robot, parsed, gid, sequence)
                 ingest(payload)
@@ -325,7 +324,8 @@ class ZenohSource:
         missed = self._gaps.missed(gid, sequence)
         if missed:
             self._model.count_message(TRANSPORT, "lost", missed)
-            lost, before = self._gaps.lost(gid), self._gaps.lost(gid) - missed
+            lost = self._gaps.lost(gid)
+            before = lost - missed
             if not before or len(str(lost)) > len(str(before)):  # its first loss, then at each power of ten
                 log.warning(
                     "%d samples of %s's %s (publisher %s) never heard so far: the router or the link "
