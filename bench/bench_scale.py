@@ -4,8 +4,10 @@
 one Python Zenoh router, `overseer run --dds.disabled --zenoh.connect ROUTER --ingest.workers W`, and
 the load generator (`bench.loadgen`) publishing N robots x 50 components at 1 Hz as rmw_zenoh does,
 with the realistic profile (1 % of statuses changing a second, 2 % of robots in trouble) unless
-`--profile live`. The generator waits until the exporter's subscriptions match every robot, so the
-ramp-up (every robot's first array) is inside the window. Beside the fleet, one more robot
+`--profile live`; `--components`, `--rate`, `--change-share`, `--trouble-share`, `--down-share`,
+`--down-seconds` and `--seed` shape the fleet as they do `bench.loadgen`'s. The generator waits until
+the exporter's subscriptions match every robot, so the ramp-up (every robot's first array) is inside
+the window. Beside the fleet, one more robot
 (`bench.change_probe`) changes a value every second: the time each change takes to reach the exporter's
 model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
 the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
@@ -43,14 +45,14 @@ from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_i
 from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, static_server
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
-from bench.loadgen import running_loadgen
+from bench.loadgen import add_shape_arguments, running_loadgen, shape_arguments, shape_of
+from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from testbed.ports import fresh_domain_id
 from testbed.processes import RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
-COMPONENTS = 50
 SETTLE_SECONDS = 4.0  # after the generator stops, for the last samples to be counted
 FLOOR_RATIO = 1.3  # Prometheus's scrape of the exporter against its scrape of the same bytes served static
 RULE_SHARE_SHOWN = 0.5  # % of the group's interval: the rules that cost at least this get a row
@@ -110,11 +112,13 @@ class Wiring:
         """The router's CPU seconds so far (0 without one)."""
         return cpu_seconds(self.router.process.pid) if self.router else 0.0
 
-    def probe(self, exporter_url: str) -> contextlib.AbstractContextManager[ChangeProbe | None]:
+    def probe(
+        self, exporter_url: str, components: int
+    ) -> contextlib.AbstractContextManager[ChangeProbe | None]:
         """The change probe over Zenoh; none over DDS (the probe publishes as rmw_zenoh does)."""
         if self.zenoh_endpoint is None:
             return contextlib.nullcontext()
-        return ChangeProbe(exporter_url, self.zenoh_endpoint, COMPONENTS)
+        return ChangeProbe(exporter_url, self.zenoh_endpoint, components)
 
 
 @contextlib.contextmanager
@@ -235,20 +239,36 @@ def shipped_rules_rows(exporter_url: str, directory: Path, seconds: float, inter
     ]
 
 
+def fleet_label(shape: FleetShape, rate: float) -> str:
+    """The fleet in a row's name: its size and rate, its profile, and what differs from the defaults."""
+    label = f"{shape.robots} robots x {shape.components}"
+    label += "" if rate == 1 else f" at {rate:g} Hz"
+    label += f", {shape.profile}"
+    default = FleetShape(shape.robots, shape.components, shape.profile)
+    if shape.profile == REALISTIC and shape.change_share != default.change_share:
+        label += f", {shape.change_share:.2%} of statuses changing a second"
+    if shape.trouble_share != default.trouble_share:
+        label += f", {shape.trouble_share:.2%} of robots in trouble"
+    if shape.down_share != default.down_share:
+        label += f", {shape.down_share:.2%} going down a minute for {shape.down_seconds:g} s"
+    return label + ("" if shape.seed == default.seed else f", seed {shape.seed}")
+
+
 def run(
-    robots: int,
+    shape: FleetShape,
     workers: int,
-    profile: str,
     seconds: float,
     prometheus_seconds: float = 0,
     interval: int = 30,
     exporter_options: tuple[str, ...] = (),
     rules: bool = False,
     transport: str = ZENOH,
+    rate: float = 1.0,
 ) -> list[Row]:
-    """Publish `robots` x 50 at 1 Hz for `seconds` into an exporter with `workers` ingest workers."""
+    """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers."""
     plural = "s" if workers > 1 else ""
-    label = f"{robots} robots x {COMPONENTS}, {transport}, {profile}, {workers} worker{plural}"
+    robots = shape.robots
+    label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}"
     label += "".join(f", {option}" for option in exporter_options)
     phases = 1 + rules  # the floor's, then the rules'
     publishing = seconds + (
@@ -271,8 +291,7 @@ def run(
         started_cpu, router_cpu, started = tree_cpu_seconds(pid), wires.router_cpu(), 0.0
         with running_loadgen(
             [
-                f"--robots={robots}",
-                f"--profile={profile}",
+                *shape_arguments(shape, rate),
                 *wires.loadgen_args,
                 f"--wait-for-subscribers={max(60, robots / 50)}",
                 f"--duration={publishing}",
@@ -282,7 +301,7 @@ def run(
             loadgen.wait_ready(max(60, robots / 50))
             started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
             prometheus_rows: list[Row] = []
-            with wires.probe(exporter.url) as probe:
+            with wires.probe(exporter.url, shape.components) as probe:
                 time.sleep(max(0.0, seconds - CHECK_SECONDS))
                 checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
                 if prometheus_seconds:
@@ -313,7 +332,7 @@ def run(
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
-        Row("scale", f"{label}: exporter memory a component", rss / (robots * COMPONENTS), "bytes"),
+        Row("scale", f"{label}: exporter memory a component", rss / (robots * shape.components), "bytes"),
         *(
             [Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core")]
             if wires.router
@@ -339,7 +358,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="1000", help="comma-separated fleet sizes (default 1000)")
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
-    parser.add_argument("--profile", default="realistic", choices=["realistic", "live"])
     parser.add_argument("--transport", default=ZENOH, choices=TRANSPORTS, help="zenoh (default) or dds")
     parser.add_argument("--seconds", type=float, default=60)
     parser.add_argument(
@@ -355,20 +373,21 @@ def main() -> None:
     parser.add_argument(
         "--rules", action="store_true", help="then the shipped rules too (with --prometheus-seconds)"
     )
+    add_shape_arguments(parser)
     options = parser.parse_args()
     rows: list[Row] = []
     for robots in [int(size) for size in options.robots.split(",")]:
         for workers in [int(count) for count in options.workers.split(",")]:
             rows += run(
-                robots,
+                shape_of(options, robots),
                 workers,
-                options.profile,
                 options.seconds,
                 options.prometheus_seconds,
                 options.scrape_interval,
                 tuple(options.exporter_option),
                 options.rules,
                 options.transport,
+                options.rate,
             )
     emit(rows)
 

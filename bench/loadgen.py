@@ -225,6 +225,12 @@ class LoadGenerator:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The fleet, its change profile, the wire and the run's length."""
     parser.add_argument("--robots", type=int, default=1000, help="number of robots (default 1000)")
+    add_shape_arguments(parser)
+    add_wire_arguments(parser)
+
+
+def add_shape_arguments(parser: argparse.ArgumentParser) -> None:
+    """What a robot publishes, how often, and how the fleet changes (all but the number of robots)."""
     parser.add_argument(
         "--components",
         type=int,
@@ -264,6 +270,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--down-seconds", type=float, default=30.0, help="how long a robot stays down (default 30)"
     )
     parser.add_argument("--seed", type=int, default=1, help="seed of the change profile (default 1)")
+
+
+def add_wire_arguments(parser: argparse.ArgumentParser) -> None:
+    """The robots' names, the wire they publish on and the run's length."""
     parser.add_argument("--namespace-prefix", default="robot", help="robots are PREFIX1..PREFIXN")
     parser.add_argument("--transport", choices=TRANSPORTS, default=ZENOH, help="zenoh (default) or dds")
     parser.add_argument(
@@ -310,18 +320,8 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
             raise ValueError(f"{flag}: expected a share from 0 to 1, got {getattr(args, name)}")
     if not _ROS_NAMESPACE.fullmatch(args.namespace_prefix):
         raise ValueError(f"--namespace-prefix: expected ROS name tokens, got {args.namespace_prefix!r}")
-    shape = FleetShape(
-        robots=args.robots,
-        components=args.components,
-        profile=args.profile,
-        change_share=args.change_share,
-        trouble_share=args.trouble_share,
-        down_share=args.down_share,
-        down_seconds=args.down_seconds,
-        seed=args.seed,
-    )
     return LoadSettings(
-        shape=shape,
+        shape=shape_of(args, args.robots),
         rate=args.rate,
         transport=args.transport,
         zenoh=ZenohEndpoints(
@@ -336,6 +336,35 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
         wait_for_subscribers=args.wait_for_subscribers,
         ready_file=args.ready_file,
     )
+
+
+def shape_of(args: argparse.Namespace, robots: int) -> FleetShape:
+    """The fleet of `robots` that `add_shape_arguments`' arguments describe."""
+    return FleetShape(
+        robots=robots,
+        components=args.components,
+        profile=args.profile,
+        change_share=args.change_share,
+        trouble_share=args.trouble_share,
+        down_share=args.down_share,
+        down_seconds=args.down_seconds,
+        seed=args.seed,
+    )
+
+
+def shape_arguments(shape: FleetShape, rate: float) -> list[str]:
+    """The generator's arguments for `shape` at `rate` publications a robot a second."""
+    return [
+        f"--robots={shape.robots}",
+        f"--components={shape.components}",
+        f"--rate={rate!r}",
+        f"--profile={shape.profile}",
+        f"--change-share={shape.change_share!r}",
+        f"--trouble-share={shape.trouble_share!r}",
+        f"--down-share={shape.down_share!r}",
+        f"--down-seconds={shape.down_seconds!r}",
+        f"--seed={shape.seed}",
+    ]
 
 
 def wire_of(settings: LoadSettings) -> Wire:

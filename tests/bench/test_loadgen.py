@@ -6,6 +6,7 @@ an exporter would read.
 
 from __future__ import annotations
 
+import argparse
 import threading
 import time
 from collections.abc import Sequence
@@ -13,7 +14,15 @@ from collections.abc import Sequence
 import pytest
 import zenoh
 
-from bench.loadgen import LoadGenerator, LoadSettings, Pacing, main
+from bench.loadgen import (
+    LoadGenerator,
+    LoadSettings,
+    Pacing,
+    add_arguments,
+    main,
+    settings_of,
+    shape_arguments,
+)
 from bench.loadgen_payloads import (
     LIVE,
     STAMP,
@@ -260,6 +269,23 @@ def test_bad_arguments_are_refused_with_the_flag_named(
     with pytest.raises(SystemExit):
         main(arguments)
     assert message in capsys.readouterr().err
+
+
+def test_a_fleets_arguments_give_the_generator_that_same_fleet() -> None:
+    shape = FleetShape(
+        robots=123,
+        components=20,
+        profile=LIVE,
+        change_share=0.037,
+        trouble_share=0.1,
+        down_share=0.05,
+        down_seconds=12.5,
+        seed=7,
+    )
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    settings = settings_of(parser.parse_args(shape_arguments(shape, 2.5)))
+    assert (settings.shape, settings.rate) == (shape, 2.5)
 
 
 def test_the_attachment_is_patched_to_rmw_zenohs_33_bytes() -> None:

@@ -1,0 +1,39 @@
+"""The scale benchmark at its smallest, with a fleet shaped by its options, to a real router and exporter.
+
+Others run `bench_scale` with fleets of their own (sizes, rates, change and trouble shares): what it
+asks the generator for must be what it measures and labels.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.bench_scale import run
+from bench.common import Row
+from bench.loadgen_payloads import FleetShape
+
+pytestmark = pytest.mark.servers
+
+ROBOTS = 20
+COMPONENTS = 20
+RATE = 2.0
+SECONDS = 16.0
+
+
+def test_a_small_fleet_at_two_hertz_is_published_measured_and_labelled_as_asked() -> None:
+    shape = FleetShape(robots=ROBOTS, components=COMPONENTS, change_share=0.05)
+    rows = {row.figure: row for row in run(shape, workers=1, seconds=SECONDS, rate=RATE)}
+    label = "20 robots x 20 at 2 Hz, realistic, 5.00% of statuses changing a second, zenoh, 1 worker"
+
+    def row(figure: str) -> Row:
+        return rows[f"{label}: {figure}"]
+
+    expected = ROBOTS * RATE * SECONDS
+    published = next(row for figure, row in rows.items() if figure.startswith(f"{label}: published"))
+    assert 0.9 * expected <= published.value <= 1.05 * expected, rows.keys()
+    assert row("lost updates").value == 0 and row("lost updates").met
+    assert row("of which the exporter counted lost").value == 0
+    assert row("exporter CPU a message").value > 0
+    assert row("exporter memory a component").unit == "bytes" and row("exporter memory a component").value > 0
+    assert row("changes timed").value >= SECONDS / 2  # the probe, with the fleet's components, once a second
+    assert row("a change to /metrics, p99").value < 1
