@@ -88,6 +88,10 @@ def test_flags_override_the_file(tmp_path: Path) -> None:
             "ros1:\n  robots:\n    - {name: a, master_uri: 'ftp://h'}\n",
             "ros1.robots[0].master_uri: expected http://",
         ),
+        (
+            "zenoh:\n  queue_length: 0\n",
+            "zenoh.queue_length: expected a number of samples from 1 to 10000000, got 0",
+        ),
         ("- a list\n", "expected a mapping at the top"),
         ("fleet: [\n", "is not valid YAML"),
     ],

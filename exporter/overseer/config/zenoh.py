@@ -14,6 +14,8 @@ from overseer.config.parsers import boolean, listed, string, whole_number
 ZENOH_MODES = ("client", "peer")
 ZENOH_KEY_FORMATS = ("rmw_zenoh", "bridge")
 _ZENOH_ENDPOINT = re.compile(r"[a-z][a-z0-9-]*/\S+")
+DEFAULT_QUEUE_LENGTH = 65_536  # 6.5 s of 10,000 robots at 1 Hz, their first seconds' backlog
+MAX_QUEUE_LENGTH = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,7 @@ class ZenohConfig:
     key_formats: tuple[str, ...] = ZENOH_KEY_FORMATS
     robot_name: str | None = None  # for diagnostics topics without a namespace (default "domain<N>")
     multicast_scouting: bool = False
+    queue_length: int = DEFAULT_QUEUE_LENGTH  # samples waiting for the ingest (a subscription's, a worker's)
 
     @property
     def unnamespaced_robot(self) -> str:
@@ -93,6 +96,14 @@ OPTIONS: tuple[Option, ...] = (
         "find routers and peers by multicast scouting too (true or false)",
         metavar="BOOL",
     ),
+    option(
+        "zenoh.queue_length",
+        f"{DEFAULT_QUEUE_LENGTH}",
+        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds "
+        "(per subscription with one ingest worker, per worker with several); beyond, they are dropped and "
+        "counted. Each holds its payload while it waits: about 5 kB at 50 components",
+        metavar="N",
+    ),
 )
 KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
@@ -128,6 +139,13 @@ def zenoh_config(raw: dict[str, Any]) -> ZenohConfig:
     if file is not None and not Path(string(file, "zenoh.config")).is_file():
         raise ConfigError(f"zenoh.config: cannot read {file!r}: no such file")
     robot_name = raw.get("robot_name")
+    queue_length = whole_number(
+        raw.get("queue_length", defaults.queue_length),
+        "zenoh.queue_length",
+        1,
+        MAX_QUEUE_LENGTH,
+        "a number of samples",
+    )
     return ZenohConfig(
         enabled=boolean(raw.get("enabled", bool(raw)), "zenoh.enabled"),
         mode=mode,
@@ -140,4 +158,5 @@ def zenoh_config(raw: dict[str, Any]) -> ZenohConfig:
         multicast_scouting=boolean(
             raw.get("multicast_scouting", defaults.multicast_scouting), "zenoh.multicast_scouting"
         ),
+        queue_length=queue_length,
     )

@@ -20,12 +20,13 @@ from overseer.model.shard import Shard
 from overseer.simulator.zenoh_publisher import attachment
 from overseer.sources.topic_names import AGGREGATED
 from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
-from overseer.sources.zenoh.source import QUEUE_CAPACITY, ZenohSource
+from overseer.sources.zenoh.source import ZenohSource
 from testbed.processes import running_simulator, wait_for
 from testbed.zenoh import endpoint, running_router, simulator_args
 
 ROBOTS = 8
 WORKERS = 2
+QUEUE_LENGTH = 300  # samples a worker's queue holds in the test of a flood
 
 
 def test_each_worker_receives_only_the_samples_of_the_robots_it_owns(tmp_path: Path) -> None:
@@ -66,7 +67,7 @@ def test_a_worker_whose_ingest_falls_behind_drops_and_counts_instead_of_growing(
     # Not started: nothing drains the queue, as when a flood outruns the ingest.
     model = FleetModel()
     shard = Shard().for_worker(0, WORKERS)
-    source = ZenohSource(ZenohConfig(enabled=True), model, shard)
+    source = ZenohSource(ZenohConfig(enabled=True, queue_length=QUEUE_LENGTH), model, shard)
     robot = next(name for name in (f"robot{index}" for index in range(1, 100)) if shard.owns(name))
     token = publisher_token(0, "1f", 10, robot, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
     payload = SampleBytes(encode_diagnostic_array(DiagnosticArray(0, 0, "", ())))
@@ -77,12 +78,12 @@ def test_a_worker_whose_ingest_falls_behind_drops_and_counts_instead_of_growing(
 
     source._on_data(sample(1))  # heard: the publisher's numbering starts there
     handler = source._queued()  # the handler every subscription of a worker is declared with
-    for number in range(2, QUEUE_CAPACITY + 7):
+    for number in range(2, QUEUE_LENGTH + 7):
         handler(sample(number))
     assert model.snapshot().message_counts.get(("zenoh", "dropped")) == 5
     while (queued := source._samples.get_nowait() if not source._samples.empty() else None) is not None:
         source._on_data(queued)
-    source._on_data(sample(QUEUE_CAPACITY + 7))
+    source._on_data(sample(QUEUE_LENGTH + 7))
     counts = model.snapshot().message_counts
-    assert counts.get(("zenoh", "received")) == QUEUE_CAPACITY + 2
+    assert counts.get(("zenoh", "received")) == QUEUE_LENGTH + 2
     assert counts.get(("zenoh", "lost"), 0) == 0  # the five were heard, and counted dropped: not lost too

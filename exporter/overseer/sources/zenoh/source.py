@@ -74,8 +74,6 @@ MAX_PENDING_PUBLISHERS = 10_000
 MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
 MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
 MAX_FOLLOWED_TOPICS = 100_000  # per-topic subscriptions of a worker (bounded against token floods)
-CHANNEL_CAPACITY = 8192  # samples waiting for the ingest, per subscription (about 4 kB each at 50 components)
-QUEUE_CAPACITY = 2 * CHANNEL_CAPACITY  # samples waiting for a worker's ingest, all its subscriptions together
 
 
 @dataclass
@@ -166,7 +164,7 @@ class ZenohSource:
             # Samples queue in a channel that Zenoh fills without the GIL, and a thread of ours drains it:
             # a callback would hold Zenoh's receiving thread on the GIL for every sample, so a busy moment
             # in Python would stall the link and the router would drop samples.
-            subscriber = session.declare_subscriber(key, FifoChannel(CHANNEL_CAPACITY))
+            subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
             declared.append(subscriber)
             drain = threading.Thread(target=self._drain, args=(subscriber.handler,), name="zenoh-data")
             drain.daemon = True
@@ -236,7 +234,7 @@ class ZenohSource:
         return Callback(self._enqueue, indirect=False)
 
     def _enqueue(self, sample: zenoh.Sample) -> None:
-        if self._samples.qsize() < QUEUE_CAPACITY:
+        if self._samples.qsize() < self._config.queue_length:
             self._samples.put(sample)
         else:  # the ingest is that far behind (a flood): drop and count rather than grow without bound
             self._model.count_message(TRANSPORT, "dropped")

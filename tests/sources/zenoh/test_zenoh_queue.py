@@ -1,0 +1,103 @@
+"""While the ingest is behind, up to `zenoh.queue_length` samples wait for it; beyond, they count as lost.
+
+A real router and a Zenoh source in this process, whose ingest the test holds up (as 10,000 robots' first
+arrays hold it up for seconds) while a robot publishes a burst of numbered samples of 5 kB. The samples
+the queue holds are all read once the ingest goes on; with a queue too short, the router drops the rest
+and the gaps in the robot's numbers count them.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from overseer.codec.cdr import encode_diagnostic_array
+from overseer.config.zenoh import ZenohConfig
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetModel
+from overseer.simulator.zenoh_publisher import attachment
+from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
+from overseer.sources.zenoh.source import ZenohSource
+from testbed.processes import wait_for
+from testbed.zenoh import client_session, endpoint, running_router
+
+pytestmark = pytest.mark.servers
+
+BURST = 8000  # samples of 5 kB: 40 MB, more than the router and the loopback link hold for a stalled reader
+BURST_RATE = 2000  # samples a second
+VALUES = tuple((f"key{index}", "x" * 90) for index in range(50))
+STATUS = DiagnosticStatus(0, "/burst", "ok", "", VALUES)
+PAYLOAD = encode_diagnostic_array(DiagnosticArray(0, 0, "", (STATUS,)))
+
+
+def counts(model: FleetModel) -> tuple[int, int]:
+    """Samples received and counted lost over Zenoh so far."""
+    messages = model.snapshot().message_counts
+    return messages.get(("zenoh", "received"), 0), messages.get(("zenoh", "lost"), 0)
+
+
+@pytest.mark.parametrize(("queue_length", "all_kept"), [(BURST + 100, True), (100, False)])
+def test_a_burst_waits_for_an_ingest_held_up_by_the_test_as_long_as_the_queue_holds_it(
+    tmp_path: Path, queue_length: int, all_kept: bool
+) -> None:
+    assert len(PAYLOAD) > 5000
+    model = FleetModel()
+    held_up = threading.Event()
+    go_on = threading.Event()
+    with running_router(tmp_path) as port, client_session(port) as robot:
+        config = ZenohConfig(enabled=True, connect=(endpoint(port),), queue_length=queue_length)
+        source = ZenohSource(config, model)
+        ingest = source._on_data
+
+        def held(sample: Any) -> None:  # the ingest, held up by the test from the burst's first sample
+            if sample.attachment is not None and sample.attachment.to_bytes()[:8] != bytes(8):
+                held_up.set()
+                go_on.wait()
+            ingest(sample)
+
+        source._on_data = held  # type: ignore[method-assign]
+        source.start()
+        try:
+            token = publisher_token(
+                0, str(robot.zid()), 10, "bursty", "aggregator", "diagnostics_agg", DIAGNOSTIC_ARRAY_HASH
+            )
+            robot.liveliness().declare_token(token)
+            gid, key = publisher_gid(token), data_key(0, "bursty", "diagnostics_agg")
+
+            def put(number: int) -> None:
+                robot.put(key, PAYLOAD, attachment=attachment(number, time.time_ns(), gid))
+
+            def heard() -> bool:
+                put(0)  # numbered 0 until heard: the burst counts from there
+                return counts(model)[0] > 0
+
+            wait_for(heard, 30, interval=0.2, message="the robot heard")
+            started = time.monotonic()
+            for number in range(1, BURST + 1):  # at a pace the link and the router keep up with
+                put(number)
+                time.sleep(max(0.0, started + number / BURST_RATE - time.monotonic()))
+            assert held_up.wait(10), "the burst never reached the ingest"
+            time.sleep(1)  # the burst's last samples arrive (or are dropped) while the ingest is held up
+            go_on.set()
+
+            def settled() -> tuple[int, int] | None:
+                before = counts(model)
+                time.sleep(0.5)
+                return before if counts(model) == before else None
+
+            wait_for(settled, 30, message="the samples kept all read")
+            put(BURST + 1)  # what the exporter missed of the burst is a gap before this one
+            received, lost = wait_for(settled, 30, message="the sample after the burst read")
+        finally:
+            go_on.set()
+            source.stop()
+    if all_kept:
+        assert lost == 0
+        assert received >= BURST + 2  # the first sample (or more), the whole burst, the one after it
+    else:
+        assert lost > 0
+        assert received + lost >= BURST + 2  # every sample of the burst read, or counted lost
