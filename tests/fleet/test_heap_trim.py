@@ -6,6 +6,7 @@ import logging
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -18,12 +19,12 @@ from overseer.fleet.workers import process as worker_process
 
 # A backlog's worth of samples freed between live objects, then the heap trimmed: what RSS says.
 _FRAGMENTED_HEAP = """
-import sys
+import os
 from overseer.heap_trim import trim_heap
 
 def resident() -> int:
     with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * 4096
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 blocks = [bytearray(60_000) for _ in range(4000)]  # 240 MB, each below glibc's mmap threshold
 kept = blocks[::20]  # one in twenty stays, so the free space lies between live blocks
@@ -56,12 +57,25 @@ def test_the_trimming_thread_trims_at_its_interval(monkeypatch: pytest.MonkeyPat
         return 1
 
     monkeypatch.setattr(heap_trim, "_TRIM", trim)
-    thread = heap_trim.trim_heap_every(0.05)
+    stop = threading.Event()
+    thread = heap_trim.trim_heap_every(0.05, stop)
     assert thread is not None and thread.daemon and thread.name == "heap-trim"
-    deadline = time.monotonic() + 5
-    while len(calls) < 3 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    try:
+        deadline = time.monotonic() + 5
+        while len(calls) < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        stop.set()
+        thread.join(5)
     assert calls[:3] == [0, 0, 0]
+    assert not thread.is_alive()
+
+
+def test_a_process_starts_one_trimming_thread_however_often_asked(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(heap_trim, "_trimming", False)
+    monkeypatch.setattr(heap_trim, "_trim_loop", lambda interval, stop: None)  # started, and ends at once
+    assert heap_trim.trim_heap_every() is not None
+    assert heap_trim.trim_heap_every() is None
 
 
 def test_without_malloc_trim_nothing_is_started(monkeypatch: pytest.MonkeyPatch) -> None:

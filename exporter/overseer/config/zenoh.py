@@ -99,9 +99,11 @@ OPTIONS: tuple[Option, ...] = (
     option(
         "zenoh.queue_length",
         f"{DEFAULT_QUEUE_LENGTH}",
-        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds "
-        "(per subscription with one ingest worker, per worker with several); beyond, they are dropped and "
-        "counted. Each holds its payload while it waits: about 5 kB at 50 components",
+        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds. With "
+        "one ingest worker, per subscription (two topics per key format); beyond, Zenoh waits and the "
+        "router drops what does not fit (counted as lost where rmw_zenoh numbers it). With several, per "
+        "worker; beyond, they are dropped and counted. Each holds its payload while it waits (about 5 kB "
+        "at 50 components): the memory it may take is this many times the largest sample",
         metavar="N",
     ),
 )

@@ -27,7 +27,7 @@ from testbed.zenoh import client_session, endpoint, running_router
 
 pytestmark = pytest.mark.servers
 
-BURST = 8000  # samples of 5 kB: 40 MB, more than the router and the loopback link hold for a stalled reader
+BURST = 10_000  # of 5 kB: 50 MB, more than the router and the link hold, and than the old 8,192
 BURST_RATE = 2000  # samples a second
 VALUES = tuple((f"key{index}", "x" * 90) for index in range(50))
 STATUS = DiagnosticStatus(0, "/burst", "ok", "", VALUES)
