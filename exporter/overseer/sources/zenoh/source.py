@@ -71,7 +71,6 @@ PRUNE_INTERVAL_SECONDS = 60.0
 ATTRIBUTION_GRACE_SECONDS = 3.0  # a publisher with no token by then (another rmw, a bridge): the domain's
 MAX_TOKENS_PER_ROBOT = 64
 MAX_PENDING_PUBLISHERS = 10_000
-MAX_DEPARTED_PUBLISHERS = 10_000  # publishers remembered as gone (their GIDs), the oldest forgotten first
 MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
 MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's or worker's (bounded against key floods)
 MAX_FOLLOWED_TOPICS = 100_000  # per-topic subscriptions of a worker (bounded against token floods)
@@ -117,8 +116,6 @@ class ZenohSource:
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
         self._gaps = SequenceGaps()  # by publisher GID: what each sent and this session never heard
         self._unattributed: dict[bytes, _Unattributed] = {}
-        # GIDs whose token went, in order: their samples still waiting in a queue are no sign of life.
-        self._departed: dict[bytes, None] = {}
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
         # A worker's share: a subscription per namespaced topic of its robots, all feeding one queue.
@@ -310,10 +307,6 @@ class ZenohSource:
                     return
                 if not self._shard.owns(robot):
                     return
-            if gid in self._departed and robot not in self._tokens:
-                # Sent before its publisher, the robot's last, left, and read after: the robot stays down.
-                self._model.count_message(TRANSPORT, "received")
-                return
             ingest = self._ingest_for(robot, parsed, gid)
             if ingest is not None:
                 if sequence is not None:
@@ -426,8 +419,6 @@ class ZenohSource:
                 self._model.count_source_error(TRANSPORT, "invalid_namespace")
                 return
             alive = sample.kind == zenoh.SampleKind.PUT
-            if gid:
-                self._mark_departed(gid, not alive)
             if gid and alive:
                 with self._lock:
                     self._publishers[gid] = robot
@@ -454,16 +445,6 @@ class ZenohSource:
             log.info("diagnostics publisher of %s %s", robot, "appeared" if alive else "went away")
         except Exception:  # a callback from Zenoh's threads must never raise
             log.exception("failed to process liveliness token %s", sample.key_expr)
-
-    def _mark_departed(self, gid: bytes, departed: bool) -> None:
-        """Remember (or, when its token is back, forget) that publisher `gid` left."""
-        with self._lock:
-            if not departed:
-                self._departed.pop(gid, None)
-                return
-            if len(self._departed) >= MAX_DEPARTED_PUBLISHERS:
-                del self._departed[next(iter(self._departed))]
-            self._departed[gid] = None
 
     def _prune(self) -> None:
         """Forget the ingests, tokens and publishers of robots the model has forgotten (expired)."""
