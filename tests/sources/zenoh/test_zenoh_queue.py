@@ -65,7 +65,7 @@ def test_a_burst_waits_for_an_ingest_held_up_by_the_test_as_long_as_the_queue_ho
             token = publisher_token(
                 0, str(robot.zid()), 10, "bursty", "aggregator", "diagnostics_agg", DIAGNOSTIC_ARRAY_HASH
             )
-            robot.liveliness().declare_token(token)
+            declared = robot.liveliness().declare_token(token)  # kept: collected, it would be undeclared
             gid, key = publisher_gid(token), data_key(0, "bursty", "diagnostics_agg")
 
             def put(number: int) -> None:
@@ -92,6 +92,7 @@ def test_a_burst_waits_for_an_ingest_held_up_by_the_test_as_long_as_the_queue_ho
             wait_for(settled, 30, message="the samples kept all read")
             put(BURST + 1)  # what the exporter missed of the burst is a gap before this one
             received, lost = wait_for(settled, 30, message="the sample after the burst read")
+            declared.undeclare()  # type: ignore[no-untyped-call]
         finally:
             go_on.set()
             source.stop()
