@@ -172,11 +172,6 @@ def attachment_fields(attachment: bytes | None) -> tuple[bytes | None, int | Non
     return gid, int(_SEQUENCE.unpack_from(attachment, at)[0])
 
 
-def attachment_sequence(attachment: bytes | None) -> int | None:
-    """The sequence number of an rmw_zenoh sample (one more at each publication), or None."""
-    return attachment_fields(attachment)[1]
-
-
 def parse_publisher_token(key: str, domain: int) -> DiagnosticsKey | None:
     """The diagnostics topic whose publisher a liveliness token announces; None for any other token."""
     chunks = key.split("/")
