@@ -1,8 +1,9 @@
 # The exporter, built from this repository with PyPI packages only, in two stages: a compiler builds the
-# wheel with the compiled status decoder, and the slim runtime installs it with the locked dependencies.
+# wheel with the compiled status decoder and deflater, and the slim runtime installs it with the locked
+# dependencies.
 
-# Build stage: the full image has gcc and Python's headers. scripts/build-wheel fails unless the C
-# extension built, so the runtime never falls back to the pure-Python decoder.
+# Build stage: the full image has gcc, Python's headers and zlib's. scripts/build-wheel fails unless the C
+# extensions built, so the runtime never falls back to pure Python.
 FROM python:3.11-bookworm AS build
 RUN python3 -m venv /build
 ENV PATH=/build/bin:$PATH
@@ -23,6 +24,7 @@ RUN pip install --no-cache-dir --require-hashes -r /tmp/requirements/tools.txt \
     && pip install --no-cache-dir --no-deps /tmp/dist/overseer-*.whl \
     && pip check \
     && python3 -c "from overseer.codec import compiled; assert compiled.AVAILABLE, 'no compiled decoder'" \
+    && python3 -c "from overseer.fleet import deflated; assert deflated.COMPILED, 'no compiled deflater'" \
     && rm -rf /tmp/requirements /tmp/dist
 
 RUN useradd --system --no-create-home overseer \

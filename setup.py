@@ -1,4 +1,4 @@
-"""The compiled status decoder; optional: without a C compiler the package installs pure Python.
+"""The compiled status decoder and deflater; optional: without a C compiler the package installs pure Python.
 
 OVERSEER_REQUIRE_COMPILED=1 makes it required, so a build that must ship it (the image's) fails instead.
 Everything else about the package is in pyproject.toml.
@@ -16,6 +16,14 @@ setup(
             extra_compile_args=["-O2", "-Wall", "-Wextra", "-Wno-unused-parameter"],
             # A failed build leaves overseer.codec.compiled falling back to pure Python.
             optional=os.environ.get("OVERSEER_REQUIRE_COMPILED") != "1",
-        )
+        ),
+        Extension(
+            "overseer.fleet._cdeflate",
+            ["exporter/overseer/fleet/_cdeflate.c"],
+            libraries=["z"],
+            extra_compile_args=["-O2", "-Wall", "-Wextra", "-Wno-unused-parameter"],
+            # Without it, overseer.fleet.deflated falls back to Python's zlib module.
+            optional=os.environ.get("OVERSEER_REQUIRE_COMPILED") != "1",
+        ),
     ]
 )

@@ -1,8 +1,9 @@
 """Memory: resident bytes per component with 100,000 components, everything the exporter keeps included.
 
-Each robot's arrays arrive as bytes objects of their own and go through the DDS source's ingest into
-the model: three arrays a robot, the later ones with other voltages (so that the ingest's changed-status
-path and the exposition's partial re-render run too), the exposition rendering after each.
+Each robot's arrays arrive as bytes objects of their own and go through the DDS source's ingest into the
+model: three arrays a robot, the later ones with other voltages (so that the ingest's changed-status path
+and the exposition's partial re-render run too), the exposition rendering after each. The heap is trimmed
+before the count, as the exporter trims it every minute (`overseer.heap_trim`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import re
 from bench.common import Row, emit, resident_bytes
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.fleet.exposition import FleetExposition
+from overseer.heap_trim import trim_heap
 from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
@@ -31,6 +33,7 @@ def main() -> None:
     exposition = FleetExposition(model, re.compile(".*"))
     assembler = ExpositionAssembler(["dds"])
     gc.collect()
+    trim_heap()
     before = resident_bytes()
     ingests = [
         PayloadIngest(model, f"robot{robot}", "dds", f"rt/robot{robot}/diagnostics_agg", WIRE_FORMAT)
@@ -42,6 +45,7 @@ def main() -> None:
             ingest(payload(statuses, f"{11 + robot / ROBOTS + second / 100:.5f}", second))
         assembler.assemble([exposition.render_part()])
     gc.collect()
+    trim_heap()  # as the exporter does every minute: the scrapes' passing buffers are no memory it keeps
     components = sum(len(r.components) for r in model.snapshot().robots)
     per_component = (resident_bytes() - before) / components
     emit(

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gzip
 import re
 import statistics
 import tempfile
@@ -90,12 +91,15 @@ def counted(url: str, transport: str) -> Counts:
 
 
 def scrape(url: str) -> tuple[float, int]:
-    """Seconds and bytes of one `/metrics` read as Prometheus asks for it (text format)."""
-    request = urllib.request.Request(url + "/metrics", headers={"Accept": "text/plain;version=0.0.4"})
+    """Seconds of one `/metrics` read as Prometheus asks for it (text format, gzip), and the text's bytes."""
+    headers = {"Accept": "text/plain;version=0.0.4", "Accept-Encoding": "gzip"}
+    request = urllib.request.Request(url + "/metrics", headers=headers)
     started = time.perf_counter()
     with urllib.request.urlopen(request, timeout=300) as response:
-        size = len(response.read())
-    return time.perf_counter() - started, size
+        body = response.read()
+        gzipped = response.headers.get("Content-Encoding") == "gzip"
+    seconds = time.perf_counter() - started
+    return seconds, len(gzip.decompress(body) if gzipped else body)
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ Debian's Prometheus scrape a recording target to learn the header it really send
 
 from __future__ import annotations
 
-import gzip
 import http.server
+import subprocess
 import threading
 import time
 import urllib.request
@@ -25,6 +25,7 @@ from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionForma
 from overseer.serve.http import OverseerServer
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from support.oracle import parse_openmetrics
+from support.rendering import gunzip_one_member
 from testbed.model_server import serving
 from testbed.ports import free_port
 from testbed.processes import wait_for
@@ -153,7 +154,7 @@ def fetch(server: OverseerServer, accept: str | None, use_gzip: bool) -> tuple[s
         body = response.read()
         encoding = response.headers["Content-Encoding"]
         content_type = response.headers["Content-Type"]
-    return content_type, encoding, gzip.decompress(body) if encoding == "gzip" else body
+    return content_type, encoding, gunzip_one_member(body) if encoding == "gzip" else body
 
 
 @pytest.mark.parametrize("use_gzip", [False, True], ids=["plain", "gzip"])
@@ -170,6 +171,22 @@ def test_every_format_is_served_with_its_content_type_plain_and_gzip(use_gzip: b
     # Text 1.0.0 is text 0.0.4 for legacy names; the OpenMetrics versions are the same bytes too.
     assert answers[PROMETHEUS_3_TEXT_ONLY][2] == answers[None][2]
     assert answers[PROMETHEUS_2][2] == answers[PROMETHEUS_3][2] == answers[PROMETHEUS_3_DOTS][2]
+
+
+def test_curl_compressed_reads_the_gzip_answer_as_the_plain_one() -> None:
+    # curl, like browsers, reads one gzip member only: an answer laid together from many robots'
+    # compressed pieces must still be one member, or curl fails (and other clients show one robot).
+    with fleet_server() as server:
+        _, _, plain = fetch(server, PROMETHEUS_2, use_gzip=False)
+        options = ["--silent", "--show-error", "--fail", "--compressed", "-H", f"Accept: {PROMETHEUS_2}"]
+        curl = subprocess.run(
+            ["curl", *options, server.url + "/metrics"],
+            capture_output=True,
+            timeout=30,
+            check=True,
+        )
+    assert curl.stdout == plain
+    assert plain.count(b"ros_diagnostics_robot_up{") == 3
 
 
 def test_an_openmetrics_only_request_reads_back_with_the_strict_parser() -> None:

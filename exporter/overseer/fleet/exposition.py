@@ -2,7 +2,8 @@
 
 Each robot's lines are kept between scrapes and rebuilt only when the robot's state or the set of its
 stale components changed (most robots merely republished the same diagnostics); within a changed robot
-only the components whose record changed are rendered again. The lines are the same bytes in every
+only the components whose record changed are rendered again. They are kept deflated (`deflated`), so
+that a gzip scrape sends the unchanged robots' bytes as they are. The lines are the same bytes in every
 format a scrape may ask for (`exposition_formats`), so one cached part serves the text format and
 OpenMetrics alike; `assembler` adds the headers. The tests hold the result byte-identical to
 prometheus-client's rendering of the same fleet.
@@ -19,6 +20,7 @@ from typing import cast
 
 from prometheus_client.utils import floatToGoString
 
+from overseer.fleet.deflated import Deflated, deflate, inflate, join
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.fleet.metric_values import NumericValues
 from overseer.levels import Level, worst
@@ -39,8 +41,9 @@ def escape_label_value(value: str) -> str:
 class _RobotLines:
     """One robot's rendered per-component lines and what they were rendered for.
 
-    `levels`, `changes`, `values` and `messages` hold every component's lines of each family;
-    component i's lines of family k start at `offsets[FAMILIES * i + k]`. `components` are the records
+    `levels`, `changes`, `values` and `messages` hold every component's lines of each family, deflated
+    (`deflated`: a tenth of the memory, and a scrape sends them as they are); component i's lines of
+    family k start at `offsets[FAMILIES * i + k]` of the family's text. `components` are the records
     they were rendered from (None for those missing from their feed's latest message): a component whose
     record is the same object again renders the same lines (when the robot's up, timing and staleness did
     not change), so they are copied instead.
@@ -52,10 +55,10 @@ class _RobotLines:
     info: str  # its ros_diagnostics_robot_info line
     counts: bytes  # its ros_diagnostics_robot_components lines
     robot_changes: bytes  # its ros_diagnostics_robot_level_changes_total line
-    levels: bytes
-    changes: bytes
-    values: bytes
-    messages: bytes
+    levels: Deflated
+    changes: Deflated
+    values: Deflated
+    messages: Deflated
     components: tuple[Component | None, ...]
     offsets: array[int]
 
@@ -122,17 +125,17 @@ class FleetExposition:
         return ExpositionPart(
             len(current),
             (
-                b"".join(levels),
-                "".join(robot_level).encode(),
-                "".join(robot_up).encode(),
-                "".join(last_message).encode(),
-                "".join(periods).encode(),
-                "".join(info).encode(),
-                b"".join(counts),
-                b"".join(robot_changes),
-                b"".join(changes),
-                b"".join(values),
-                b"".join(messages),
+                join(levels),
+                deflate("".join(robot_level).encode()),
+                deflate("".join(robot_up).encode()),
+                deflate("".join(last_message).encode()),
+                deflate("".join(periods).encode()),
+                deflate("".join(info).encode()),
+                deflate(b"".join(counts)),
+                deflate(b"".join(robot_changes)),
+                join(changes),
+                join(values),
+                join(messages),
             ),
             dict(snapshot.message_counts),
             dict(snapshot.dropped_statuses),
@@ -147,7 +150,7 @@ class ExpositionPart:
     """The rendered series of one model (a worker's robots): lines per fleet family, and its counters."""
 
     robots: int
-    families: tuple[bytes, ...]  # the lines of each of metric_families.FLEET_FAMILIES, no header
+    families: tuple[Deflated, ...]  # the lines of each of metric_families.FLEET_FAMILIES, no header
     message_counts: dict[tuple[str, str], int]
     dropped_statuses: dict[str, int]
     truncated_strings: int
@@ -240,6 +243,7 @@ class _LinesBuilder:
 
     def __init__(self, cached: _RobotLines | None) -> None:
         self._cached = cached
+        self._cached_text: tuple[bytes, ...] = ()  # its families inflated, once lines are copied from them
         self._pieces: tuple[list[bytes], ...] = tuple([] for _ in range(FAMILIES))
         self._sizes = [0] * FAMILIES
         self._offsets = array("I", self._sizes)
@@ -264,10 +268,10 @@ class _LinesBuilder:
         self._offsets.extend(sizes)
         self._next = index + 1
 
-    def finish(self, count: int) -> tuple[bytes, bytes, bytes, bytes, array[int]]:
-        """The families' bytes for `count` components, and where every component's lines start."""
+    def finish(self, count: int) -> tuple[Deflated, Deflated, Deflated, Deflated, array[int]]:
+        """The families' lines for `count` components, and where every component's lines start."""
         self._copy_cached(count)
-        levels, changes, values, messages = (b"".join(pieces) for pieces in self._pieces)
+        levels, changes, values, messages = (deflate(b"".join(pieces)) for pieces in self._pieces)
         return levels, changes, values, messages, self._offsets
 
     def _copy_cached(self, stop: int) -> None:
@@ -276,8 +280,11 @@ class _LinesBuilder:
             return
         cached, first, last = self._cached, FAMILIES * self._next, FAMILIES * stop
         old = cached.offsets
+        if not self._cached_text:
+            families = (cached.levels, cached.changes, cached.values, cached.messages)
+            self._cached_text = tuple(inflate(family) for family in families)
         shifts = []
-        for family, text in enumerate((cached.levels, cached.changes, cached.values, cached.messages)):
+        for family, text in enumerate(self._cached_text):
             start, end = old[first + family], old[last + family]
             self._pieces[family].append(text[start:end])
             shifts.append(self._sizes[family] - start)

@@ -1,10 +1,12 @@
 """One exposition from rendered parts (one per ingest worker): headers once, lines of every part, counters.
 
 The same parts make any format the scrape asked for: the formats differ only in their headers and end.
+A gzip answer is laid together from the parts' deflated lines without compressing them again.
 """
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from collections.abc import Iterable, Sequence
 
@@ -13,7 +15,9 @@ from prometheus_client.registry import Collector, CollectorRegistry
 from overseer import __version__
 from overseer.codec import compiled
 from overseer.fleet import metric_families as contract
+from overseer.fleet.deflated import Deflated, deflate, gzip_member, inflate
 from overseer.fleet.exposition import ExpositionPart, escape_label_value, go_float
+from overseer.fleet.metric_families import MetricFamily
 from overseer.fleet.metric_values import DROP_REASONS, message_counts
 from overseer.serve.exposition_formats import TEXT, ExpositionFormat
 
@@ -43,11 +47,22 @@ class ExpositionAssembler:
         body: list[bytes] = []
         for index, family in enumerate(contract.FLEET_FAMILIES):
             body.append(fmt.header(family).encode())
-            body.extend(part.families[index] for part in parts)
-        body.append(self._exporter_families(parts, fmt).encode())
-        body.append(fmt.extras(self._extra))
-        body.append(fmt.end)
+            body.extend(inflate(part.families[index]) for part in parts)
+        body.append(self._rest(parts, fmt))
         return b"".join(body)  # joined once: no copy of the whole body on the way
+
+    def assemble_gzip(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> bytes:
+        """`assemble`'s answer gzipped, from the parts' deflated lines as they are: only the rest is new."""
+        pieces: list[Deflated] = []
+        for index, family in enumerate(contract.FLEET_FAMILIES):
+            pieces.append(_deflated_header(family, fmt))
+            pieces.extend(part.families[index] for part in parts)
+        pieces.append(deflate(self._rest(parts, fmt)))
+        return gzip_member(pieces)
+
+    def _rest(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> bytes:
+        """What follows the fleet's families: the exporter's own, the extra collectors', the end."""
+        return self._exporter_families(parts, fmt).encode() + fmt.extras(self._extra) + fmt.end
 
     def _exporter_families(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> str:
         message_totals: Counter[tuple[str, str]] = Counter()
@@ -90,3 +105,8 @@ class ExpositionAssembler:
         lines.append(fmt.header(contract.WEB_INFO))
         lines.append(self._web_info)
         return "".join(lines)
+
+
+@functools.cache
+def _deflated_header(family: MetricFamily, fmt: ExpositionFormat) -> Deflated:
+    return deflate(fmt.header(family).encode())

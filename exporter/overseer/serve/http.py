@@ -353,8 +353,12 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _metrics(self, head_only: bool) -> None:
         fmt = negotiate_format(self.headers.get("Accept"))
-        body = self.server.assembler.assemble(self.server.fleet.exposition_parts(), fmt)
-        self._send(200, body, fmt.content_type, head_only, compressible=True)
+        parts = self.server.fleet.exposition_parts()
+        if accepts_gzip(self.headers.get("Accept-Encoding")):
+            body = self.server.assembler.assemble_gzip(parts, fmt)
+            self._send(200, body, fmt.content_type, head_only, encoding="gzip")
+        else:
+            self._send(200, self.server.assembler.assemble(parts, fmt), fmt.content_type, head_only)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:
         body = json.dumps(document, ensure_ascii=False, allow_nan=False).encode("utf-8")
@@ -368,13 +372,13 @@ class _Handler(BaseHTTPRequestHandler):
         head_only: bool = False,
         compressible: bool = False,
         extra: tuple[tuple[str, str], ...] = (),
+        encoding: str | None = None,
     ) -> None:
+        """Answer `body`; gzipped here when `compressible` and the client takes it, or already `encoding`."""
         self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
-        if compressible and accepts_gzip(self.headers.get("Accept-Encoding")):
+        if compressible and encoding is None and accepts_gzip(self.headers.get("Accept-Encoding")):
             body = gzip.compress(body, compresslevel=1)
-            encoding: str | None = "gzip"
-        else:
-            encoding = None
+            encoding = "gzip"
         self.send_response(status)
         self.send_header("Content-Type", content_type)
         self.send_header("Content-Length", str(len(body)))

@@ -9,6 +9,7 @@ from dataclasses import replace
 from types import MappingProxyType
 from typing import Any
 
+from overseer.fleet.deflated import EMPTY
 from overseer.fleet.exposition import ExpositionPart
 from overseer.fleet.metric_families import FLEET_FAMILIES
 from overseer.levels import Level, severity_rank
@@ -165,4 +166,4 @@ def counters_part(counts: Mapping[CounterKey, float]) -> ExpositionPart:
             forgotten[key[1]] = int(value)
         else:
             truncated = int(value)
-    return ExpositionPart(0, (b"",) * len(FLEET_FAMILIES), messages, dropped, truncated, errors, forgotten)
+    return ExpositionPart(0, (EMPTY,) * len(FLEET_FAMILIES), messages, dropped, truncated, errors, forgotten)

@@ -1,0 +1,118 @@
+"""Deflated pieces: laid end to end they are one gzip answer, their checksums combine, bad data is refused."""
+
+from __future__ import annotations
+
+import random
+import threading
+import zlib
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from overseer.fleet import deflated
+from overseer.fleet.deflated import Deflated, deflate, gzip_member, inflate, join
+from support.rendering import gunzip_one_member
+
+
+def texts(count: int, seed: int = 7) -> list[bytes]:
+    """Exposition-like lines and noise, some empty, some longer than the compressor's window."""
+    chance = random.Random(seed)
+    made = []
+    for index in range(count):
+        lines = "".join(
+            f'ros_diagnostics_level{{component="/c{n}",robot="robot{index}"}} {chance.randrange(4)}.0\n'
+            for n in range(chance.randrange(0, 400))
+        )
+        made.append(lines.encode() + chance.randbytes(chance.randrange(0, 64)))
+    return made
+
+
+@pytest.fixture(params=["compiled", "python"])
+def implementation(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """Each test on the compiled deflater and on Python's zlib module (the fallback)."""
+    if request.param == "compiled":
+        assert deflated.COMPILED, "the compiled deflater was not built (make setup builds it)"
+    else:
+        monkeypatch.setattr(deflated, "_deflate", deflated.deflate_in_python)
+        monkeypatch.setattr(deflated, "_inflate", deflated.inflate_in_python)
+        monkeypatch.setattr(deflated, "crc32_combine", deflated.crc32_combine_in_python)
+    yield request.param
+
+
+def test_pieces_laid_end_to_end_are_one_gzip_member_of_the_texts_joined(implementation: str) -> None:
+    parts = texts(60)
+    pieces = [deflate(text) for text in parts]
+    assert all(inflate(piece) == text for piece, text in zip(pieces, parts, strict=True))
+    body = gzip_member(pieces)
+    assert gunzip_one_member(body) == b"".join(parts)
+    whole = join(pieces)
+    assert (whole.crc, whole.size) == (zlib.crc32(b"".join(parts)), len(b"".join(parts)))
+    assert inflate(whole) == b"".join(parts)
+    # Pieces joined are pieces again: a worker's families join into the assembler's answer.
+    assert gunzip_one_member(gzip_member([join(pieces[:20]), join(pieces[20:])])) == b"".join(parts)
+
+
+def test_a_piece_is_a_fraction_of_its_text() -> None:
+    text = b"".join(texts(40))
+    assert len(deflate(text).data) < len(text) / 4
+
+
+def test_the_compiled_deflater_writes_what_pythons_zlib_module_does() -> None:
+    assert deflated.COMPILED
+    for text in texts(30, seed=3):
+        if text:
+            assert deflated._deflate(text) == deflated.deflate_in_python(text)
+
+
+@pytest.mark.parametrize("size2", [0, 1, 4095, (1 << 20) + 17, 3 << 20])
+def test_checksums_combine_as_zlib_computes_the_whole(size2: int) -> None:
+    first, second = random.Random(size2).randbytes(1000), random.Random(-size2).randbytes(size2)
+    crc1, crc2 = zlib.crc32(first), zlib.crc32(second)
+    combined = zlib.crc32(first + second)
+    assert deflated.crc32_combine_in_python(crc1, crc2, size2) == combined
+    assert deflated.crc32_combine(crc1, crc2, size2) == combined
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda piece: piece._replace(size=piece.size + 1),
+        lambda piece: piece._replace(size=piece.size - 1),
+        lambda piece: piece._replace(data=piece.data[:-9]),
+    ],
+    ids=["claims more", "claims less", "cut short"],
+)
+def test_a_piece_that_does_not_hold_its_length_is_refused(
+    implementation: str, damage: Callable[[Deflated], Deflated]
+) -> None:
+    piece = deflate(b"".join(texts(5)))
+    with pytest.raises(ValueError, match="inflate"):
+        inflate(damage(piece))
+
+
+def test_the_compiled_deflater_keeps_the_interpreter_lock_where_pythons_zlib_lets_go() -> None:
+    # A scrape deflates thousands of pieces: letting go of the lock for each, beside a busy ingest
+    # thread, waits for it again every time (seconds a scrape).
+    text = b"".join(texts(400, seed=11)) * 8
+    counted = [0]
+    stop = threading.Event()
+
+    def busy() -> None:
+        while not stop.is_set():
+            counted[0] += 1
+
+    def others_progress(work: Callable[[], object]) -> int:
+        before = counted[0]
+        work()
+        return counted[0] - before
+
+    thread = threading.Thread(target=busy, daemon=True)
+    thread.start()
+    try:
+        held = min(others_progress(lambda: deflated._deflate(text)) for _ in range(3))
+        released = max(others_progress(lambda: deflated.deflate_in_python(text)) for _ in range(3))
+    finally:
+        stop.set()
+        thread.join()
+    # Held, the busy thread only runs in the one switch interval after the call; let go, all through it.
+    assert released > 4 * held, (held, released)
