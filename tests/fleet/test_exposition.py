@@ -161,6 +161,25 @@ def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
     assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and len(rendered) == 1
 
 
+def test_a_family_whose_lines_come_out_the_same_keeps_its_compressed_piece() -> None:
+    model, _ = fleet()
+    rendering = Rendering(model)
+    robot = "robot9"
+    three = tuple(DiagnosticStatus(1, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
+    model.apply(robot, DiagnosticArray(0, 0, "", three), "dds")
+    rendering.fast()
+    before = rendering.exposition._robots[robot]
+    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
+    model.apply(robot, DiagnosticArray(0, 0, "", changed), "dds")
+    fast, reference = rendering.both(TEXT)
+    assert fast == reference
+    after = rendering.exposition._robots[robot]
+    # Only a value changed: the levels, level changes and messages are the same bytes, not compressed again.
+    assert (after.levels, after.changes, after.messages) == (before.levels, before.changes, before.messages)
+    assert after.levels is before.levels and after.changes is before.changes
+    assert after.messages is before.messages and after.values != before.values
+
+
 # Property: through any sequence of model changes, the cached exposition equals the collector's.
 _statuses = st.lists(
     st.builds(

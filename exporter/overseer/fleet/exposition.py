@@ -243,7 +243,7 @@ class _LinesBuilder:
 
     def __init__(self, cached: _RobotLines | None) -> None:
         self._cached = cached
-        self._cached_text: tuple[bytes, ...] = ()  # its families inflated, once lines are copied from them
+        self._cached_text: list[bytes | None] = [None] * FAMILIES  # its families, inflated when needed
         self._pieces: tuple[list[bytes], ...] = tuple([] for _ in range(FAMILIES))
         self._sizes = [0] * FAMILIES
         self._offsets = array("I", self._sizes)
@@ -271,8 +271,32 @@ class _LinesBuilder:
     def finish(self, count: int) -> tuple[Deflated, Deflated, Deflated, Deflated, array[int]]:
         """The families' lines for `count` components, and where every component's lines start."""
         self._copy_cached(count)
-        levels, changes, values, messages = (deflate(b"".join(pieces)) for pieces in self._pieces)
+        levels, changes, values, messages = (
+            self._deflated(family, b"".join(pieces)) for family, pieces in enumerate(self._pieces)
+        )
         return levels, changes, values, messages, self._offsets
+
+    def _deflated(self, family: int, text: bytes) -> Deflated:
+        """`text` deflated, or the cached piece when that holds the very same text (cheaper to compare)."""
+        # A changed status mostly changes its values alone: its level and level-changes lines, and
+        # so those families of the robot, come out the same bytes.
+        if self._cached is not None:
+            cached = self._cached_families()[family]
+            if cached.size == len(text) and self._cached_text_of(family) == text:
+                return cached
+        return deflate(text)
+
+    def _cached_families(self) -> tuple[Deflated, Deflated, Deflated, Deflated]:
+        assert self._cached is not None
+        cached = self._cached
+        return cached.levels, cached.changes, cached.values, cached.messages
+
+    def _cached_text_of(self, family: int) -> bytes:
+        """A cached family's text, inflated the first time it is needed."""
+        text = self._cached_text[family]
+        if text is None:
+            text = self._cached_text[family] = inflate(self._cached_families()[family])
+        return text
 
     def _copy_cached(self, stop: int) -> None:
         """Copy the cached lines of components `self._next` to `stop` (where they had the same index)."""
@@ -280,11 +304,9 @@ class _LinesBuilder:
             return
         cached, first, last = self._cached, FAMILIES * self._next, FAMILIES * stop
         old = cached.offsets
-        if not self._cached_text:
-            families = (cached.levels, cached.changes, cached.values, cached.messages)
-            self._cached_text = tuple(inflate(family) for family in families)
         shifts = []
-        for family, text in enumerate(self._cached_text):
+        for family in range(FAMILIES):
+            text = self._cached_text_of(family)
             start, end = old[first + family], old[last + family]
             self._pieces[family].append(text[start:end])
             shifts.append(self._sizes[family] - start)
