@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import random
 import threading
 import zlib
@@ -15,9 +16,9 @@ from support.rendering import gunzip_one_member
 
 
 def texts(count: int, seed: int = 7) -> list[bytes]:
-    """Exposition-like lines and noise, some empty, some longer than the compressor's window."""
+    """Exposition-like lines and noise, one empty, some longer than the compressor's window."""
     chance = random.Random(seed)
-    made = []
+    made = [b""]
     for index in range(count):
         lines = "".join(
             f'ros_diagnostics_level{{component="/c{n}",robot="robot{index}"}} {chance.randrange(4)}.0\n'
@@ -52,6 +53,33 @@ def test_pieces_laid_end_to_end_are_one_gzip_member_of_the_texts_joined(implemen
     assert gunzip_one_member(gzip_member([join(pieces[:20]), join(pieces[20:])])) == b"".join(parts)
 
 
+def test_a_piece_larger_than_the_scratch_buffer_round_trips(implementation: str) -> None:
+    text = b"".join(texts(300, seed=5)) * 3
+    assert len(text) > 2 << 20
+    assert gunzip_one_member(gzip_member([deflate(b"head"), deflate(text), deflate(b"tail")])) == (
+        b"head" + text + b"tail"
+    )
+
+
+@pytest.mark.parametrize(
+    "arguments",
+    [(1, 2, -5), (2**32, 0, 5), (0, 2**40, 5)],
+    ids=["negative size", "crc1 over 32 bits", "crc2 over 32 bits"],
+)
+def test_the_compiled_combine_refuses_what_is_no_crc_or_size(arguments: tuple[int, int, int]) -> None:
+    assert deflated.COMPILED
+    with pytest.raises(ValueError, match="crc32_combine"):
+        deflated.crc32_combine(*arguments)
+
+
+@pytest.mark.parametrize("settings", [(2**32 + 1, 13, 5), (1, 16, 5), (1, 13, 0), (10, 13, 5)])
+def test_the_compiled_deflater_refuses_settings_zlib_has_not(settings: tuple[int, int, int]) -> None:
+    compiled = importlib.import_module("overseer.fleet._cdeflate")  # built by make setup
+    with pytest.raises(ValueError, match="deflate: a setting from"):
+        compiled.deflate(b"text", *settings)
+    assert deflated._deflate(b"text") == deflated.deflate_in_python(b"text")  # and goes on as before
+
+
 def test_a_piece_is_a_fraction_of_its_text() -> None:
     text = b"".join(texts(40))
     assert len(deflate(text).data) < len(text) / 4
@@ -79,8 +107,11 @@ def test_checksums_combine_as_zlib_computes_the_whole(size2: int) -> None:
         lambda piece: piece._replace(size=piece.size + 1),
         lambda piece: piece._replace(size=piece.size - 1),
         lambda piece: piece._replace(data=piece.data[:-9]),
+        lambda piece: piece._replace(data=piece.data[:-4]),  # whole text, but no sync marker to join on
+        lambda piece: piece._replace(data=zlib.compress(b"".join(texts(5)), 1, -15)),  # a final block
+        lambda piece: piece._replace(data=b"\xff\xff\xff" + piece.data),
     ],
-    ids=["claims more", "claims less", "cut short"],
+    ids=["claims more", "claims less", "cut short", "no sync marker", "final block", "not deflate"],
 )
 def test_a_piece_that_does_not_hold_its_length_is_refused(
     implementation: str, damage: Callable[[Deflated], Deflated]

@@ -17,23 +17,28 @@
  * throughout every call. Compressed output goes to a scratch buffer first, so that each piece is
  * allocated once at its size. */
 static z_stream deflater, inflater;
-static int deflater_settings[3] = {-1, -1, -1}; /* level, window bits, memory level; -1: not set up */
-static int inflater_ready = 0;
+static int deflater_ready = 0, inflater_ready = 0;
+static int deflater_settings[3]; /* level, window bits, memory level, while deflater_ready */
 static Bytef *scratch = NULL;
 static size_t scratch_size = 0;
 #define SCRATCH_LIMIT (1 << 20) /* larger pieces (rare: a family of the whole fleet) get a buffer of their own */
 
 static int deflater_for(int level, int window_bits, int memory_level) {
     int wanted[3] = {level, window_bits, memory_level};
-    if (memcmp(wanted, deflater_settings, sizeof wanted) == 0) return deflateReset(&deflater) == Z_OK ? 0 : -1;
-    if (deflater_settings[0] != -1) deflateEnd(&deflater);
-    deflater_settings[0] = -1;
+    if (deflater_ready && memcmp(wanted, deflater_settings, sizeof wanted) == 0) {
+        if (deflateReset(&deflater) == Z_OK) return 0;
+        PyErr_SetString(PyExc_RuntimeError, "deflate: zlib could not start again");
+        return -1;
+    }
+    if (deflater_ready) deflateEnd(&deflater);
+    deflater_ready = 0;
     memset(&deflater, 0, sizeof deflater);
     if (deflateInit2(&deflater, level, Z_DEFLATED, -window_bits, memory_level, Z_DEFAULT_STRATEGY) != Z_OK) {
         PyErr_SetString(PyExc_ValueError, "deflate: zlib refused the settings");
         return -1;
     }
     memcpy(deflater_settings, wanted, sizeof wanted);
+    deflater_ready = 1;
     return 0;
 }
 
@@ -56,16 +61,28 @@ static Bytef *output_room(size_t size, Bytef **own) {
     return scratch;
 }
 
+/* `value` as an int from `low` to `high` into `*out`; -1 with ValueError or TypeError otherwise. */
+static int small_int(PyObject *value, long low, long high, int *out) {
+    long number = PyLong_AsLong(value);
+    if (number == -1 && PyErr_Occurred()) return -1;
+    if (number < low || number > high) {
+        PyErr_Format(PyExc_ValueError, "deflate: a setting from %ld to %ld, got %ld", low, high, number);
+        return -1;
+    }
+    *out = (int)number;
+    return 0;
+}
+
 /* deflate(text, level, window_bits, memory_level) -> (raw deflate ending in a sync flush, CRC-32) */
 static PyObject *deflate_piece(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 4) {
         PyErr_SetString(PyExc_TypeError, "deflate(text, level, window_bits, memory_level)");
         return NULL;
     }
-    int level = (int)PyLong_AsLong(args[1]);
-    int window_bits = (int)PyLong_AsLong(args[2]);
-    int memory_level = (int)PyLong_AsLong(args[3]);
-    if (PyErr_Occurred()) return NULL;
+    int level, window_bits, memory_level;
+    if (small_int(args[1], -1, 9, &level) < 0 || small_int(args[2], 9, 15, &window_bits) < 0 ||
+        small_int(args[3], 1, 9, &memory_level) < 0)
+        return NULL;
     Py_buffer text;
     if (PyObject_GetBuffer(args[0], &text, PyBUF_SIMPLE) < 0) return NULL;
     PyObject *result = NULL;
@@ -74,10 +91,7 @@ static PyObject *deflate_piece(PyObject *self, PyObject *const *args, Py_ssize_t
         PyErr_SetString(PyExc_OverflowError, "deflate: a piece of at most 2 GB");
         goto done;
     }
-    if (deflater_for(level, window_bits, memory_level) < 0) {
-        if (!PyErr_Occurred()) PyErr_SetString(PyExc_RuntimeError, "deflate: zlib could not start again");
-        goto done;
-    }
+    if (deflater_for(level, window_bits, memory_level) < 0) goto done;
     /* deflateBound covers a finished stream; the sync flush's empty stored block needs a few more. */
     size_t bound = deflateBound(&deflater, (uLong)text.len) + 16;
     Bytef *room = output_room(bound, &own);
@@ -97,6 +111,11 @@ done:
     PyMem_RawFree(own);
     PyBuffer_Release(&text);
     return result;
+}
+
+static int ends_in_sync_marker(const Bytef *data, Py_ssize_t size) {
+    static const Bytef marker[4] = {0x00, 0x00, 0xff, 0xff};
+    return size >= 4 && memcmp(data + size - 4, marker, 4) == 0;
 }
 
 /* inflate(data, size) -> the `size` bytes of text that raw deflate `data` holds */
@@ -133,8 +152,9 @@ static PyObject *inflate_piece(PyObject *self, PyObject *const *args, Py_ssize_t
     inflater.next_out = (Bytef *)PyBytes_AS_STRING(out);
     inflater.avail_out = (uInt)size;
     int status = inflate(&inflater, Z_SYNC_FLUSH);
-    int complete = (status == Z_OK || status == Z_BUF_ERROR || status == Z_STREAM_END) &&
-                   inflater.avail_out == 0 && inflater.avail_in == 0;
+    /* Whole, and joinable: no final block, and ending in a sync flush's empty stored block. */
+    int complete = (status == Z_OK || status == Z_BUF_ERROR) && inflater.avail_out == 0 &&
+                   inflater.avail_in == 0 && ends_in_sync_marker((const Bytef *)data.buf, data.len);
     if (!complete) {
         Py_CLEAR(out);
         PyErr_Format(PyExc_ValueError, "inflate: the data does not hold the %zd bytes of text it should", size);
@@ -151,9 +171,15 @@ static PyObject *combine(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         return NULL;
     }
     unsigned long crc1 = PyLong_AsUnsignedLong(args[0]);
+    if (crc1 == (unsigned long)-1 && PyErr_Occurred()) return NULL;
     unsigned long crc2 = PyLong_AsUnsignedLong(args[1]);
+    if (crc2 == (unsigned long)-1 && PyErr_Occurred()) return NULL;
     long long size2 = PyLong_AsLongLong(args[2]);
-    if (PyErr_Occurred()) return NULL;
+    if (size2 == -1 && PyErr_Occurred()) return NULL;
+    if (crc1 > 0xFFFFFFFFUL || crc2 > 0xFFFFFFFFUL || size2 < 0) {
+        PyErr_SetString(PyExc_ValueError, "crc32_combine: CRC-32s of 32 bits and a size of 0 or more");
+        return NULL;
+    }
     return PyLong_FromUnsignedLong(crc32_combine(crc1, crc2, (z_off_t)size2));
 }
 

@@ -67,7 +67,7 @@ def join(pieces: Iterable[Deflated]) -> Deflated:
 
 
 def inflate(piece: Deflated) -> bytes:
-    """The text of `piece`; ValueError when its data does not give back its length."""
+    """The text of `piece`; ValueError when its data does not give back its length, or would not join."""
     return _inflate(piece.data, piece.size) if piece.size else b""
 
 
@@ -86,10 +86,18 @@ def deflate_in_python(text: bytes) -> tuple[bytes, int]:
 
 def inflate_in_python(data: bytes, size: int) -> bytes:
     """`_cdeflate.inflate` by Python's zlib module."""
-    text = zlib.decompressobj(-zlib.MAX_WBITS).decompress(data)
-    if len(text) != size:
-        raise ValueError(f"inflate: the data holds {len(text)} bytes of text, not {size}")
+    reader = zlib.decompressobj(-zlib.MAX_WBITS)
+    try:
+        text = reader.decompress(data, size + 1)
+    except zlib.error as error:
+        raise ValueError(f"inflate: {error}") from None
+    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
+    if len(text) != size or reader.eof or reader.unconsumed_tail or not data.endswith(_SYNC_MARKER):
+        raise ValueError(f"inflate: the data does not hold the {size} bytes of text it should")
     return text
+
+
+_SYNC_MARKER = b"\x00\x00\xff\xff"
 
 
 _ZEROS = memoryview(bytes(1 << 20))
