@@ -32,6 +32,7 @@ class ZenohConfig:
     robot_name: str | None = None  # for diagnostics topics without a namespace (default "domain<N>")
     multicast_scouting: bool = False
     queue_length: int = DEFAULT_QUEUE_LENGTH  # samples waiting for the ingest (a subscription's, a worker's)
+    shared_memory: bool = False  # take part in Zenoh's shared memory with sessions on the same host
 
     @property
     def unnamespaced_robot(self) -> str:
@@ -106,6 +107,15 @@ OPTIONS: tuple[Option, ...] = (
         "at 50 components): the memory it may take is this many times the largest sample",
         metavar="N",
     ),
+    option(
+        "zenoh.shared_memory",
+        "false",
+        "take part in Zenoh's shared memory with routers and robots on the same host (true or false; this "
+        "setting wins over the zenoh.config file's). Off, their samples come over the link: with it, the "
+        "exporter maps each sender's pool (16 MB a session), and samples waiting for a busy ingest hold "
+        "the sender's buffers",
+        metavar="BOOL",
+    ),
 )
 KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
@@ -161,4 +171,5 @@ def zenoh_config(raw: dict[str, Any]) -> ZenohConfig:
             raw.get("multicast_scouting", defaults.multicast_scouting), "zenoh.multicast_scouting"
         ),
         queue_length=queue_length,
+        shared_memory=boolean(raw.get("shared_memory", defaults.shared_memory), "zenoh.shared_memory"),
     )

@@ -135,6 +135,18 @@ def test_zenoh_section_turns_the_transport_on_with_its_keys(tmp_path: Path) -> N
     assert session_config(ZenohConfig(True)).get_json("scouting/multicast/enabled") == "false"
 
 
+def test_shared_memory_is_off_unless_asked_for_even_under_a_native_file_that_turns_it_on(
+    tmp_path: Path,
+) -> None:
+    native = tmp_path / "zenoh.json5"
+    native.write_text("{transport: {shared_memory: {enabled: true}}}")
+    key = "transport/shared_memory/enabled"
+    assert session_config(ZenohConfig(True)).get_json(key) == "false"
+    assert session_config(load_config(None, {"zenoh.config": str(native)}).zenoh).get_json(key) == "false"
+    asked = load_config(None, {"zenoh.config": str(native), "zenoh.shared_memory": True}).zenoh
+    assert asked.shared_memory and session_config(asked).get_json(key) == "true"
+
+
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
@@ -147,6 +159,7 @@ def test_zenoh_section_turns_the_transport_on_with_its_keys(tmp_path: Path) -> N
         ({"zenoh.key_formats": []}, "zenoh.key_formats: expected at least one"),
         ({"zenoh.config": "/nonexistent/z.json5"}, "zenoh.config: cannot read '/nonexistent/z.json5'"),
         ({"zenoh.enabled": "yes"}, "zenoh.enabled: expected true or false, got 'yes'"),
+        ({"zenoh.shared_memory": "on"}, "zenoh.shared_memory: expected true or false, got 'on'"),
         ({"zenoh.routers": []}, "zenoh.routers: unknown key"),
     ],
 )

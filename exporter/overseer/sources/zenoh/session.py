@@ -36,6 +36,10 @@ def session_config(config: ZenohConfig) -> zenoh.Config:
         _insert(native, "listen/endpoints", [], "zenoh.listen")
     if config.config is None:
         _insert(native, "scouting/multicast/enabled", config.multicast_scouting, "zenoh.multicast_scouting")
+    # A diagnostics array is over Zenoh's 3 kB threshold: with shared memory on, every sender on this host
+    # would hand it over in a segment of its own pool, which the exporter would map and, while the ingest
+    # is behind, hold.
+    _insert(native, "transport/shared_memory/enabled", config.shared_memory, "zenoh.shared_memory")
     # The exporter must start, and serve, with no router reachable, and keep trying to reach one: a
     # client's first attempt is bounded (it is retried and counted by the source), a peer retries alone.
     _insert(native, "connect/timeout_ms", {"client": CLIENT_CONNECT_TIMEOUT_MS, "peer": -1}, "zenoh.connect")
