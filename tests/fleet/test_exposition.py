@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -136,15 +138,25 @@ def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     assert all(rendering.exposition._robots[name] is lines for name, lines in cached.items())
 
 
+def three_components_rendered(level: int) -> tuple[Rendering, Callable[[], None]]:
+    """Robot9 of three components at `level`, rendered once; and what changes the second one's value."""
+    model, _ = fleet()
+    rendering = Rendering(model)
+    three = tuple(DiagnosticStatus(level, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
+    model.apply("robot9", DiagnosticArray(0, 0, "", three), "dds")
+    rendering.fast()
+    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
+
+    def change_a_value() -> None:
+        model.apply("robot9", DiagnosticArray(0, 0, "", changed), "dds")
+
+    return rendering, change_a_value
+
+
 def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    model, _ = fleet()
-    rendering = Rendering(model)
-    robot = "robot9"
-    three = tuple(DiagnosticStatus(0, f"/c{i}", "ok", "", (("v", str(i)),)) for i in range(3))
-    model.apply(robot, DiagnosticArray(0, 0, "", three), "dds")
-    rendering.fast()
+    rendering, change_a_value = three_components_rendered(0)
     rendered: list[bytes] = []
     original_add = exposition_module._LinesBuilder.add
 
@@ -153,8 +165,7 @@ def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
         original_add(self, index, *family_lines)
 
     monkeypatch.setattr(exposition_module._LinesBuilder, "add", counting_add)
-    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
-    model.apply(robot, DiagnosticArray(0, 0, "", changed), "dds")
+    change_a_value()
     fast, reference = rendering.both(TEXT)
     assert fast == reference
     assert len(rendered) == 1 and b'component="/c1"' in rendered[0]
@@ -162,18 +173,12 @@ def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
 
 
 def test_a_family_whose_lines_come_out_the_same_keeps_its_compressed_piece() -> None:
-    model, _ = fleet()
-    rendering = Rendering(model)
-    robot = "robot9"
-    three = tuple(DiagnosticStatus(1, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
-    model.apply(robot, DiagnosticArray(0, 0, "", three), "dds")
-    rendering.fast()
-    before = rendering.exposition._robots[robot]
-    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
-    model.apply(robot, DiagnosticArray(0, 0, "", changed), "dds")
+    rendering, change_a_value = three_components_rendered(1)  # WARN: a status-message line each
+    before = rendering.exposition._robots["robot9"]
+    change_a_value()
     fast, reference = rendering.both(TEXT)
     assert fast == reference
-    after = rendering.exposition._robots[robot]
+    after = rendering.exposition._robots["robot9"]
     # Only a value changed: the levels, level changes and messages are the same bytes, not compressed again.
     assert (after.levels, after.changes, after.messages) == (before.levels, before.changes, before.messages)
     assert after.levels is before.levels and after.changes is before.changes
