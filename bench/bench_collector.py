@@ -23,11 +23,10 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bench.bench_first_look import SampleBytes, ZenohSample, aggregator_addresses
+from bench.bench_first_look import aggregator_addresses
 from bench.common import Row, emit
 from bench.loadgen_payloads import Fleet, FleetShape
 from overseer.config.zenoh import ZenohConfig
@@ -79,7 +78,7 @@ def measure(robots: int, seconds: int, tuned: bool) -> dict[str, float]:
     store = EventStore(StoreSettings(database, 86400.0, 10**10, queue_limit=10**7))
     detector = TransitionDetector(model.limits, store.add)
     model.set_level_listener(detector.on_level_changes)
-    on_data: Callable[[Any], None] = ZenohSource(ZenohConfig(enabled=True), model)._on_data  # what it reads
+    on_sample = ZenohSource(ZenohConfig(enabled=True), model).ingest.on_sample  # what the session hands on
     addresses = aggregator_addresses(robots)
 
     def fleet_second(second: int) -> None:
@@ -87,7 +86,7 @@ def measure(robots: int, seconds: int, tuned: bool) -> dict[str, float]:
         stamp = _STAMP.pack(second, 0)
         for (key, robot_attachment), payload in zip(addresses, fleet.payloads, strict=True):
             payload[4:12] = stamp
-            on_data(ZenohSample(key, SampleBytes(bytes(payload)), robot_attachment))
+            on_sample(key, robot_attachment, bytes(payload))
         clock[0] += 1.0
         detector.check(model.snapshot())
         store.flush()

@@ -4,7 +4,7 @@ When the exporter starts beside a running fleet, every robot is new within a sec
 new robot costs per robot already known is paid squared: 10,000 robots took 12 s of CPU to be first
 heard over Zenoh (each new feed looked through every feed of the fleet) while their next arrays were
 queuing. In process, no network: the Zenoh source is handed each robot's first sample with the
-attributes Zenoh gives it (key, payload, attachment), and the DDS source adopts each robot's
+values the session reads of it (key, attachment, payload), and the DDS source adopts each robot's
 `/diagnostics_agg` writer as discovery does. The figure is the last 1,000 robots' cost at each size;
 the target is their ratio, measured in the same run.
 """
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -34,33 +33,13 @@ MEASURED = 1_000  # the last robots of each size, whose cost is the figure
 TARGET_RATIO = 1.5
 
 
-@dataclass(frozen=True)
-class SampleBytes:
-    """What the Zenoh source reads of a `zenoh.ZBytes`."""
-
-    data: bytes
-
-    def to_bytes(self) -> bytes:
-        """The bytes, as Zenoh hands them over."""
-        return self.data
-
-
-@dataclass(frozen=True)
-class ZenohSample:
-    """What the Zenoh source reads of a `zenoh.Sample`."""
-
-    key_expr: str
-    payload: SampleBytes
-    attachment: SampleBytes
-
-
-def aggregator_addresses(robots: int) -> list[tuple[str, SampleBytes]]:
+def aggregator_addresses(robots: int) -> list[tuple[str, bytes]]:
     """Each robot's key and attachment as its aggregator publishes on rmw_zenoh (robot00000 ... first)."""
     addresses = []
     for index in range(robots):
         name = f"robot{index:05d}"
         token = publisher_token(0, "1f", index, name, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
-        addresses.append((data_key(0, name, AGGREGATED), SampleBytes(attachment(1, 0, publisher_gid(token)))))
+        addresses.append((data_key(0, name, AGGREGATED), attachment(1, 0, publisher_gid(token))))
     return addresses
 
 
@@ -68,12 +47,14 @@ def zenoh_first_arrays(robots: int) -> float:
     """Seconds a robot for the last `MEASURED` of `robots` robots' first arrays through the Zenoh source."""
     payloads = Fleet(FleetShape(robots)).payloads
     source = ZenohSource(ZenohConfig(enabled=True), FleetModel(FleetLimits(max_robots=2 * robots)))
-    samples = [
-        ZenohSample(key, SampleBytes(bytes(payload)), robot_attachment)
-        for (key, robot_attachment), payload in zip(aggregator_addresses(robots), payloads, strict=True)
-    ]
-    on_data: Callable[[Any], None] = source._on_data  # handed what it reads of a zenoh.Sample
-    return _timed_tail([partial(on_data, sample) for sample in samples])
+    addresses = aggregator_addresses(robots)
+    on_sample = source.ingest.on_sample  # handed what the session reads of each zenoh.Sample
+    return _timed_tail(
+        [
+            partial(on_sample, key, robot_attachment, bytes(payload))
+            for (key, robot_attachment), payload in zip(addresses, payloads, strict=True)
+        ]
+    )
 
 
 def dds_writers_adopted(robots: int) -> float:

@@ -290,12 +290,16 @@ def zenoh_updater(tmp_path: Path, port: int, *args: str) -> Iterator[RunningProc
         process.stop()
 
 
+# With two workers, robot_a is the first's and robot_d the second's: the exporter's session relays each
+# sample of the one /diagnostics key to the worker of its publisher's robot.
+@pytest.mark.parametrize("workers", [1, 2])
 def test_zenoh_nodes_on_the_absolute_topic_are_robots_of_their_namespaces_with_one_component_per_task(
-    tmp_path: Path,
+    tmp_path: Path, workers: int
 ) -> None:
+    flag = f"--ingest.workers={workers}"
     with (
         running_router(tmp_path) as port,
-        running_exporter(tmp_path, None, *exporter_args(port), loopback_flag=False) as exporter,
+        running_exporter(tmp_path, None, *exporter_args(port, flag), loopback_flag=False) as exporter,
     ):
         with (
             zenoh_updater(
@@ -308,7 +312,7 @@ def test_zenoh_nodes_on_the_absolute_topic_are_robots_of_their_namespaces_with_o
             ),
             zenoh_updater(tmp_path, port, "--namespace=robot_a", "--node=camera", "--task=0:Frames:ok"),
             zenoh_updater(
-                tmp_path, port, "--namespace=robot_c/drivers", "--node=lidar", "--task=2:Scan:none"
+                tmp_path, port, "--namespace=robot_d/drivers", "--node=lidar", "--task=2:Scan:none"
             ),
         ):
             expected = {
@@ -317,7 +321,7 @@ def test_zenoh_nodes_on_the_absolute_topic_are_robots_of_their_namespaces_with_o
                     "drive: Late": (1, "hw0"),
                     "camera: Frames": (0, "hw0"),
                 },
-                "robot_c": {"lidar: Scan": (2, "hw0")},
+                "robot_d": {"lidar: Scan": (2, "hw0")},
             }
             wait_for(
                 lambda: all(components(exporter, name) == levels for name, levels in expected.items()),

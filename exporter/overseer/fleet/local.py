@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from multiprocessing.connection import Connection
 from typing import Any
 
 from prometheus_client.registry import Collector
@@ -62,12 +63,17 @@ class LocalFleet:
 
     @classmethod
     def build(
-        cls, config: Config, events: EventSink | None = None, start: FleetStart | None = None
+        cls,
+        config: Config,
+        events: EventSink | None = None,
+        start: FleetStart | None = None,
+        zenoh_relayed: Connection | None = None,
     ) -> LocalFleet:
         """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
 
         `events`, when given, receives the model's transitions (level changes as they are applied, and
-        what time decides, checked every second); `start` says what it follows before it hears anything.
+        what time decides, checked every second); `start` says what it follows before it hears anything;
+        `zenoh_relayed` is an ingest worker's pipe from the exporter's Zenoh relay.
         """
         model = FleetModel(config.fleet)
         metrics = config.metrics
@@ -75,7 +81,8 @@ class LocalFleet:
         exposition = FleetExposition(
             model, metrics.value_key_pattern, messages=messages, level_changes=metrics.level_changes
         )
-        return cls(model, build_sources(config, model), exposition, events, start, config.shard)
+        sources = build_sources(config, model, zenoh_relayed)
+        return cls(model, sources, exposition, events, start, config.shard)
 
     def start(self) -> None:
         """Follow the robots listed and remembered, watch transitions, start the transports, expire."""

@@ -29,6 +29,7 @@ from overseer.fleet.workers.metrics import WorkerPoolCollector
 from overseer.fleet.workers.pool import WorkerPool, WorkersUnavailable
 from overseer.model import FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import EventSink
+from overseer.sources.zenoh.relay import ZenohRelay
 
 SNAPSHOT_REUSE_SECONDS = 1.0
 
@@ -45,8 +46,17 @@ class PooledFleet:
         events: EventSink | None = None,
         start: Callable[[], FleetStart] | None = None,
     ) -> None:
-        """Prepare the pool; no worker runs until `start`. `start` says what a worker follows at first."""
-        self.pool = WorkerPool(config, events, start)
+        """Prepare the pool; no worker runs until `start`. `start` says what a worker follows at first.
+
+        Over Zenoh the exporter's own session relays each worker its robots' samples (`ZenohRelay`).
+        """
+        count = config.ingest.workers
+        self.relay = (
+            ZenohRelay(config.zenoh, config.shard, count, config.robot_namespace_depth)
+            if config.zenoh.enabled
+            else None
+        )
+        self.pool = WorkerPool(config, events, start, self.relay)
         self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
         self._counters = CounterCarry(self.pool.count)
         self._last_snapshot: FleetSnapshot | None = None
@@ -58,13 +68,17 @@ class PooledFleet:
         except Exception:
             self.pool.stop()
             raise
+        if self.relay is not None:
+            self.relay.start()
 
     def prepare_stop(self) -> None:
         """Restart no worker from now on: the exporter is stopping (and may see its workers end first)."""
         self.pool.prepare_stop()
 
     def stop(self) -> None:
-        """Stop every worker."""
+        """Stop every worker (and the Zenoh session that relays them their samples first)."""
+        if self.relay is not None:
+            self.relay.stop()
         self.pool.stop()
 
     def snapshot(self) -> FleetSnapshot:

@@ -29,6 +29,13 @@ class Shard:
         digest = zlib.crc32(robot.encode("utf-8"))
         return digest % self.count == self.index and (digest // self.count) % self.workers == self.worker
 
+    def worker_of(self, robot: str, workers: int) -> int | None:
+        """Which of `workers` workers of this shard follows `robot`; None when another shard does."""
+        digest = zlib.crc32(robot.encode("utf-8"))
+        if digest % self.count != self.index:
+            return None
+        return (digest // self.count) % workers
+
     def for_worker(self, worker: int, workers: int) -> Shard:
         """The part of this shard that ingest worker `worker` of `workers` follows."""
         if not 0 <= worker < workers:

@@ -6,6 +6,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+
     from overseer.config import Config
     from overseer.model import FleetModel
 
@@ -33,8 +35,11 @@ def enabled_transports(config: Config) -> list[str]:
     return [name for name, on in enabled if on]
 
 
-def build_sources(config: Config, model: FleetModel) -> list[Source]:
-    """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started."""
+def build_sources(config: Config, model: FleetModel, zenoh_relayed: Connection | None = None) -> list[Source]:
+    """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started.
+
+    `zenoh_relayed`: an ingest worker's pipe from the exporter's Zenoh relay, read instead of a session.
+    """
     sources: list[Source] = []
     if config.dds.enabled:
         from overseer.sources.dds.source import DdsSource
@@ -45,7 +50,12 @@ def build_sources(config: Config, model: FleetModel) -> list[Source]:
 
         robots = tuple(robot for robot in config.ros1.robots if config.shard.owns(robot.name))
         sources.append(Ros1Source(replace(config.ros1, robots=robots), model))
-    if config.zenoh.enabled:
+    if config.zenoh.enabled and zenoh_relayed is not None:
+        from overseer.sources.zenoh.relayed import RelayedZenohSource
+
+        depth = config.robot_namespace_depth
+        sources.append(RelayedZenohSource(config.zenoh, model, config.shard, zenoh_relayed, depth))
+    elif config.zenoh.enabled:
         from overseer.sources.zenoh.source import ZenohSource
 
         sources.append(ZenohSource(config.zenoh, model, config.shard, config.robot_namespace_depth))

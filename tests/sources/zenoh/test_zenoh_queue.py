@@ -11,7 +11,6 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -51,15 +50,15 @@ def test_a_burst_waits_for_an_ingest_held_up_by_the_test_as_long_as_the_queue_ho
     with running_router(tmp_path) as port, client_session(port) as robot:
         config = ZenohConfig(enabled=True, connect=(endpoint(port),), queue_length=queue_length)
         source = ZenohSource(config, model)
-        ingest = source._on_data
+        ingest = source.ingest.on_sample
 
-        def held(sample: Any) -> None:  # the ingest, held up by the test from the burst's first sample
-            if sample.attachment is not None and sample.attachment.to_bytes()[:8] != bytes(8):
+        def held(key: str, attachment: bytes | None, payload: bytes) -> None:  # held up from the burst on
+            if attachment is not None and attachment[:8] != bytes(8):
                 held_up.set()
                 go_on.wait()
-            ingest(sample)
+            ingest(key, attachment, payload)
 
-        source._on_data = held  # type: ignore[method-assign]
+        source.receiver._on_sample = held
         source.start()
         try:
             token = publisher_token(

@@ -1,89 +1,170 @@
-"""Ingest workers over Zenoh: each hears its own robots' samples only, so a worker divides the cost.
+"""Ingest workers over Zenoh: the exporter's one session relays each worker its own robots' samples.
 
-Two sources, as two ingest workers run them, follow one simulated fleet through a real router: each
-model holds exactly the robots its worker owns, and each session receives only its robots' samples
-(with the wildcard subscription of one worker, each would receive every sample and drop the others').
+The fleet's samples cross into the exporter once, in its session, and each worker receives only its
+robots' (so a worker divides the cost); the workers here are relayed sources in this process, each with a
+model of its own, reading their pipes as worker processes do.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
-from bench.bench_first_look import SampleBytes, ZenohSample
+import pytest
+
 from overseer.codec.cdr import encode_diagnostic_array
 from overseer.config.zenoh import ZenohConfig
-from overseer.messages import DiagnosticArray
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.simulator.zenoh_publisher import attachment
-from overseer.sources.topic_names import AGGREGATED
+from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
-from overseer.sources.zenoh.source import ZenohSource
+from overseer.sources.zenoh.relay import ZenohRelay
+from overseer.sources.zenoh.relayed import RelayedZenohSource
 from testbed.processes import running_simulator, wait_for
 from testbed.zenoh import endpoint, running_router, simulator_args
 
 ROBOTS = 8
 WORKERS = 2
-QUEUE_LENGTH = 300  # samples a worker's queue holds in the test of a flood
+QUEUE_LENGTH = 300  # samples that may wait for a worker, in the test of one that falls behind
+FIRST, SECOND = "robot_a", "robot_d"  # of two workers, the first's robot and the second's
 
 
-def test_each_worker_receives_only_the_samples_of_the_robots_it_owns(tmp_path: Path) -> None:
-    names = {f"robot{index}" for index in range(1, ROBOTS + 1)}
-    shards = [Shard().for_worker(worker, WORKERS) for worker in range(WORKERS)]
-    owned = [{name for name in names if shard.owns(name)} for shard in shards]
+def worker_shards() -> list[Shard]:
+    """The parts of the fleet two workers follow."""
+    return [Shard().for_worker(worker, WORKERS) for worker in range(WORKERS)]
+
+
+@contextmanager
+def relayed_workers(relay: ZenohRelay, config: ZenohConfig) -> Iterator[list[RelayedZenohSource]]:
+    """Two relayed sources attached to `relay`, each with a model of its own, reading until the block ends."""
+    sources = []
+    for worker, shard in enumerate(worker_shards()):
+        reader, writer = multiprocessing.Pipe(duplex=False)
+        sources.append(RelayedZenohSource(config, FleetModel(), shard, reader))
+        relay.attach(worker, writer)
+    for source in sources:
+        source.start()
+    try:
+        yield sources
+    finally:
+        relay.stop()
+        for source in sources:
+            source.stop()
+
+
+def components(source: RelayedZenohSource) -> dict[str, list[str]]:
+    """Robot → its components' names, in a relayed source's model."""
+    snapshot = source.ingest._model.snapshot()
+    return {robot.name: [name for name, _ in robot.components] for robot in snapshot.robots}
+
+
+def test_the_exporters_session_hears_each_sample_once_and_each_worker_only_its_robots(tmp_path: Path) -> None:
+    robots = {f"robot{index}" for index in range(1, ROBOTS + 1)}
+    owned = [{name for name in robots if shard.owns(name)} for shard in worker_shards()]
     assert all(owned)  # the hash gives each worker some of the eight
     with running_router(tmp_path) as port:
         config = ZenohConfig(enabled=True, mode="client", connect=(endpoint(port),))
-        models = [FleetModel() for _ in shards]
-        sources = [ZenohSource(config, model, shard) for model, shard in zip(models, shards, strict=True)]
-        for source in sources:
-            source.start()
-        try:
+        relay = ZenohRelay(config, Shard(), WORKERS)
+        with relayed_workers(relay, config) as workers:
+            relay.start()
             with running_simulator(tmp_path, 0, *simulator_args(port, f"--robots={ROBOTS}", "--rate=5")):
 
-                def every_robot_heard() -> bool:
-                    heard = [{robot.name for robot in model.snapshot().robots} for model in models]
-                    return heard == owned and all(
-                        robot.components for model in models for robot in model.snapshot().robots
+                def every_robot_heard_by_its_worker() -> bool:
+                    heard = [components(worker) for worker in workers]
+                    return [set(robots) for robots in heard] == owned and all(
+                        names for robots in heard for names in robots.values()
                     )
 
-                wait_for(every_robot_heard, 30, message="each worker's robots, and only those, heard")
-                before = [source.samples_heard for source in sources]
+                wait_for(every_robot_heard_by_its_worker, 30, message="each worker's robots, and only those")
+                before = relay.receiver.samples_heard, [worker.samples_heard for worker in workers]
                 time.sleep(3)
-                heard = [source.samples_heard - start for source, start in zip(sources, before, strict=True)]
-        finally:
-            for source in sources:
-                source.stop()
+                heard = relay.receiver.samples_heard - before[0]
+                relayed = [
+                    worker.samples_heard - start for worker, start in zip(workers, before[1], strict=True)
+                ]
     published = ROBOTS * 5 * 3  # robots x rate x seconds, roughly
-    for worker, samples in enumerate(heard):
+    assert 0.6 * published <= heard <= 1.4 * published  # once, in the exporter's session
+    assert sum(relayed) == pytest.approx(heard, abs=2 * ROBOTS)  # each sample to exactly one worker
+    for worker, samples in enumerate(relayed):
         share = len(owned[worker]) / ROBOTS
-        # Its own robots' samples (give or take a publication at each end), never the whole fleet's.
         assert 0.6 * share * published <= samples <= 1.4 * share * published, (worker, samples, share)
 
 
-def test_a_worker_whose_ingest_falls_behind_drops_and_counts_instead_of_growing() -> None:
-    # Not started: nothing drains the queue, as when a flood outruns the ingest.
-    model = FleetModel()
-    shard = Shard().for_worker(0, WORKERS)
-    source = ZenohSource(ZenohConfig(enabled=True, queue_length=QUEUE_LENGTH), model, shard)
-    robot = next(name for name in (f"robot{index}" for index in range(1, 100)) if shard.owns(name))
-    token = publisher_token(0, "1f", 10, robot, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
-    payload = SampleBytes(encode_diagnostic_array(DiagnosticArray(0, 0, "", ())))
+def updater_token(robot: str, entity: int) -> str:
+    """The token of a diagnostic_updater node of `robot` publishing on the absolute /diagnostics."""
+    return publisher_token(0, "1f", entity, robot, "driver", RAW, DIAGNOSTIC_ARRAY_HASH, topic_namespace="")
 
-    def sample(number: int) -> Any:  # what the source reads of a zenoh.Sample, numbered as rmw_zenoh does
-        gid = publisher_gid(token)
-        return ZenohSample(data_key(0, robot, AGGREGATED), payload, SampleBytes(attachment(number, 0, gid)))
 
-    source._on_data(sample(1))  # heard: the publisher's numbering starts there
-    handler = source._queued()  # the handler every subscription of a worker is declared with
-    for number in range(2, QUEUE_LENGTH + 7):
-        handler(sample(number))
-    assert model.snapshot().message_counts.get(("zenoh", "dropped")) == 5
-    while (queued := source._samples.get_nowait() if not source._samples.empty() else None) is not None:
-        source._on_data(queued)
-    source._on_data(sample(QUEUE_LENGTH + 7))
-    counts = model.snapshot().message_counts
-    assert counts.get(("zenoh", "received")) == QUEUE_LENGTH + 2
-    assert counts.get(("zenoh", "lost"), 0) == 0  # the five were heard, and counted dropped: not lost too
+def array(name: str) -> bytes:
+    """A DiagnosticArray with one status."""
+    return encode_diagnostic_array(DiagnosticArray(0, 0, "", (DiagnosticStatus(0, name, "ok", "hw", ()),)))
+
+
+def test_un_namespaced_samples_go_to_their_robots_worker_and_a_worker_started_again_gets_the_tokens() -> None:
+    config = ZenohConfig(enabled=True)
+    relay = ZenohRelay(config, Shard(), WORKERS)  # its session is never opened: the test hands it samples
+    assert [Shard().worker_of(name, WORKERS) for name in (FIRST, SECOND)] == [0, 1]
+    tokens = {name: updater_token(name, entity) for entity, name in enumerate((FIRST, SECOND), start=10)}
+    key = data_key(0, "", RAW)  # diagnostic_updater's absolute /diagnostics: one key for every robot
+
+    def publish(name: str, number: int) -> None:
+        relay.on_sample(key, attachment(number, 0, publisher_gid(tokens[name])), array(f"driver: {name}"))
+
+    with relayed_workers(relay, config) as workers:
+        publish(SECOND, 1)  # before its token: every worker holds it until the token says whose it is
+        for token in tokens.values():
+            relay.on_token(token, True)
+        publish(FIRST, 1)
+        publish(SECOND, 2)
+        expected = [{FIRST: [f"driver: {FIRST}"]}, {SECOND: [f"driver: {SECOND}"]}]
+        wait_for(lambda: [components(worker) for worker in workers] == expected, 5, message="each its own")
+        assert [worker.samples_heard for worker in workers] == [2, 2]  # the held one, then its own
+        # The second worker starts again: the relay tells it the tokens alive before any sample.
+        reader, writer = multiprocessing.Pipe(duplex=False)
+        restarted = RelayedZenohSource(config, FleetModel(), worker_shards()[1], reader)
+        relay.attach(1, writer)
+        restarted.start()
+        try:
+            publish(SECOND, 3)
+            # Attributed at once, not held for the 3 s grace and then given to the domain's robot.
+            wait_for(lambda: components(restarted) == expected[1], 2, message="its robot's sample")
+        finally:
+            restarted.stop()
+
+
+def test_samples_beyond_what_may_wait_for_a_worker_are_dropped_and_counted_not_lost() -> None:
+    config = ZenohConfig(enabled=True, queue_length=QUEUE_LENGTH)
+    relay = ZenohRelay(config, Shard(), 1)
+    token = publisher_token(0, "1f", 10, FIRST, "aggregator", AGGREGATED, DIAGNOSTIC_ARRAY_HASH)
+    key, gid = data_key(0, FIRST, AGGREGATED), publisher_gid(token)
+    status = DiagnosticStatus(0, "/burst", "ok", "", tuple((f"key{i}", "x" * 90) for i in range(50)))
+    payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", (status,)))  # 5 kB: the pipe fills
+    reader, writer = multiprocessing.Pipe(duplex=False)
+    relay.attach(0, writer)
+    sent = 10 * QUEUE_LENGTH
+    for number in range(1, sent + 1):  # nothing reads the pipe yet: a worker far behind
+        relay.on_sample(key, attachment(number, 0, gid), payload)
+    worker = RelayedZenohSource(config, FleetModel(), Shard(), reader)
+    worker.start()
+    model = worker.ingest._model
+
+    def counted() -> list[int]:  # received, dropped, lost
+        counts = model.snapshot().message_counts
+        return [counts.get(("zenoh", result), 0) for result in ("received", "dropped", "lost")]
+
+    try:
+        wait_for(lambda: sum(counted()) == sent, 10, message="the flood received or counted dropped")
+        relay.on_sample(key, attachment(sent + 1, 0, gid), payload)  # after the flood, numbered on
+        wait_for(lambda: sum(counted()) == sent + 1, 10, message="the sample after the flood")
+        received, dropped, lost = counted()
+    finally:
+        relay.stop()
+        worker.stop()
+    assert dropped >= sent - 3 * QUEUE_LENGTH  # what waited, what the pipe held and one batch at most
+    assert received == sent + 1 - dropped
+    assert lost == 0  # the dropped were counted as such, not as lost as well

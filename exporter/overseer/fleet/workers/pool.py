@@ -20,6 +20,7 @@ from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
 from overseer.fleet.workers.process import FAILED, READY, run_worker
 from overseer.model.events import Event
+from overseer.sources.zenoh.relay import ZenohRelay
 
 log = logging.getLogger(__name__)
 
@@ -68,17 +69,20 @@ class WorkerPool:
         config: Config,
         events: EventSink | None = None,
         start: Callable[[], FleetStart] | None = None,
+        relay: ZenohRelay | None = None,
     ) -> None:
         """Prepare the workers of `config`; `events` receives every worker's events (None: dropped).
 
         `start` tells what a worker follows before it hears anything, asked anew for each worker started
-        (a restarted worker follows the inventory and the robots remembered now).
+        (a restarted worker follows the inventory and the robots remembered now); `relay`, when given,
+        sends each worker started its Zenoh robots' samples.
         """
         self.config = config
         self._start = start or FleetStart
         self.count = config.ingest.workers
         self.restarts = [0] * self.count
         self._events = events
+        self._relay = relay
         self._context = multiprocessing.get_context("spawn")
         self._handles: list[_Handle | None] = [None] * self.count
         self._died_at = [0.0] * self.count
@@ -203,15 +207,20 @@ class WorkerPool:
     def _spawn(self, index: int) -> _Handle:
         requests, child_requests = self._context.Pipe()
         events, child_events = self._context.Pipe(duplex=False)
+        # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
+        relayed, relay_writer = self._context.Pipe(duplex=False) if self._relay else (None, None)
         process = self._context.Process(
             target=run_worker,
-            args=(self.config, index, self.count, child_requests, child_events, self._start()),
+            args=(self.config, index, self.count, child_requests, child_events, self._start(), relayed),
             name=f"overseer-ingest-{index}",
             daemon=True,
         )
         process.start()
         child_requests.close()
         child_events.close()
+        if self._relay is not None and relayed is not None and relay_writer is not None:
+            relayed.close()
+            self._relay.attach(index, relay_writer)
         handle = _Handle(index, self.restarts[index], process, requests, events)
         self._handles[index] = handle
         threading.Thread(

@@ -74,10 +74,12 @@ def run_worker(
     requests: Connection,
     events: Connection,
     start: FleetStart | None = None,
+    zenoh_relayed: Connection | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
-    `start` is what it follows before it hears anything (its share of it: the robots it owns). Once its
+    `start` is what it follows before it hears anything (its share of it: the robots it owns);
+    `zenoh_relayed` the pipe its Zenoh robots' samples come down from the exporter's session. Once its
     fleet has stopped, the process ends at once, without the interpreter's shutdown: that shutdown can
     hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
     worker left behind by a dead exporter would hold its robots' readers for good.
@@ -86,7 +88,7 @@ def run_worker(
     trim_heap_every()
     status = 1
     try:
-        status = _serve(config, worker, workers, requests, events, start)
+        status = _serve(config, worker, workers, requests, events, start, zenoh_relayed)
     except BaseException:  # whatever ends it (the exporter gone, a signal): `_exit` would say nothing
         log.exception("ingest worker %d ended", worker)
     finally:
@@ -101,6 +103,7 @@ def _serve(
     requests: Connection,
     events: Connection,
     start: FleetStart | None,
+    zenoh_relayed: Connection | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
@@ -110,7 +113,8 @@ def _serve(
     configure_logging(config.log_level, config.log_format, worker)
     config = worker_config(config, worker, workers)
     try:
-        fleet = LocalFleet.build(config, _EventSender(events).send if config.events.enabled else None, start)
+        sink = _EventSender(events).send if config.events.enabled else None
+        fleet = LocalFleet.build(config, sink, start, zenoh_relayed)
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)

@@ -1,0 +1,169 @@
+"""The exporter's Zenoh session: every robot's diagnostics and publisher tokens, handed on as plain values.
+
+One session (a client of the configured routers by default) subscribes to every robot's diagnostics keys
+with wildcards, so robots that start later, or were built against another revision of the message
+(another type hash), are heard with no restart, and to the liveliness tokens of their publishers
+(rmw_zenoh's, and zenoh-bridge-ros2dds's for the routes it serves). A sample goes on as its key,
+attachment and payload; a token as its key and whether it came or went. Routers that are not up yet are
+retried until they are.
+
+The samples queue in channels that Zenoh fills without Python's interpreter lock, and a thread of ours
+drains each: a Python callback would hold Zenoh's receiving thread on the lock for every sample, so a busy
+moment in Python would stall the link and the router would drop samples.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+from zenoh.handlers import FifoChannel
+
+from overseer.config.zenoh import ZenohConfig
+from overseer.sources.paced_drain import drain_paced
+from overseer.sources.zenoh.ingest import TICK_SECONDS
+from overseer.sources.zenoh.keys import (
+    BRIDGE,
+    RMW_ZENOH,
+    bridge_liveliness_subscription,
+    data_subscriptions,
+    liveliness_subscription,
+)
+from overseer.sources.zenoh.session import session_config
+
+log = logging.getLogger(__name__)
+
+RETRY_MIN_SECONDS = 0.5
+RETRY_MAX_SECONDS = 10.0
+
+SampleHandler = Callable[[str, bytes | None, bytes], None]  # key, attachment, payload
+TokenHandler = Callable[[str, bool], None]  # key, alive
+
+
+class ZenohReceiver:
+    """Hands every diagnostics sample and publisher token of one Zenoh session to the given handlers.
+
+    `on_unreachable` is called at each failed attempt to open the session; `tick` every `TICK_SECONDS`
+    (the ingest's upkeep) while it is open. Handlers are called from the receiver's threads, samples
+    from one thread per subscription, and must not raise.
+    """
+
+    def __init__(
+        self,
+        config: ZenohConfig,
+        on_sample: SampleHandler,
+        on_token: TokenHandler,
+        on_unreachable: Callable[[], None],
+        tick: Callable[[], None],
+    ) -> None:
+        """Prepare the session `config` describes; ConfigError at once if it is unusable."""
+        self._config = config
+        self._native = session_config(config)
+        self._on_sample = on_sample
+        self._on_token = on_token
+        self._on_unreachable = on_unreachable
+        self._tick = tick
+        self._lock = threading.Lock()
+        self._session: zenoh.Session | None = None
+        self._declared: list[zenoh.Subscriber[Any]] = []
+        self.samples_heard = 0  # samples this session received
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        """Open the session in the background."""
+        self._thread = threading.Thread(target=self._run, name="zenoh-session", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Undeclare everything and close the session."""
+        self._stop.set()
+        with self._lock:
+            session, self._session = self._session, None
+            declared, self._declared = self._declared, []
+        for subscriber in declared:
+            subscriber.undeclare()  # type: ignore[no-untyped-call]
+        if session is not None:
+            session.close()  # type: ignore[no-untyped-call]
+        if self._thread is not None:
+            self._thread.join(timeout=2)
+
+    def _run(self) -> None:
+        session = self._open()
+        if session is None:
+            return
+        domain, formats = self._config.domain, self._config.key_formats
+        # Declared without the lock held: the liveliness history is delivered to `_token` at once.
+        declared: list[zenoh.Subscriber[Any]] = []
+        for key in data_subscriptions(domain, formats):
+            subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
+            declared.append(subscriber)
+            drain = threading.Thread(target=self._drain, args=(subscriber.handler,), name="zenoh-data")
+            drain.daemon = True
+            drain.start()
+        liveliness = session.liveliness()
+        tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
+        tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
+        declared += [liveliness.declare_subscriber(key, self._token, history=True) for key in tokens]
+        with self._lock:
+            stopped = self._stop.is_set()
+            if not stopped:
+                self._session, self._declared = session, declared
+        if stopped:
+            session.close()  # type: ignore[no-untyped-call]
+            return
+        log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
+        while not self._stop.wait(TICK_SECONDS):
+            self._tick()
+
+    def _open(self) -> zenoh.Session | None:
+        delay = RETRY_MIN_SECONDS
+        while not self._stop.is_set():
+            try:
+                return zenoh.open(self._native)
+            except zenoh.ZError as error:
+                self._on_unreachable()
+                log.warning("cannot open the Zenoh session (retrying in %gs): %s", delay, error)
+            self._stop.wait(delay)
+            delay = min(delay * 2, RETRY_MAX_SECONDS)
+        return None
+
+    def _drain(self, channel: Any) -> None:
+        """Hand every sample of one subscription's channel on, in batches, until it is closed."""
+
+        def wait() -> zenoh.Sample | None:
+            try:
+                sample: zenoh.Sample = channel.recv()
+            except zenoh.ZError:  # closed: the subscriber was undeclared
+                return None
+            return sample
+
+        def poll() -> zenoh.Sample | None:
+            try:
+                sample: zenoh.Sample | None = channel.try_recv()
+            except zenoh.ZError:
+                return None
+            return sample
+
+        drain_paced(wait, poll, self._sample, self._stop.is_set)
+
+    def _sample(self, sample: zenoh.Sample) -> None:
+        self.samples_heard += 1
+        attachment = sample.attachment
+        try:
+            self._on_sample(
+                str(sample.key_expr),
+                None if attachment is None else attachment.to_bytes(),
+                sample.payload.to_bytes(),
+            )
+        except Exception:  # the drain must go on
+            log.exception("failed to hand on a sample of %s", sample.key_expr)
+
+    def _token(self, sample: zenoh.Sample) -> None:
+        try:
+            self._on_token(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+        except Exception:  # a callback from Zenoh's threads must never raise
+            log.exception("failed to hand on liveliness token %s", sample.key_expr)
