@@ -31,7 +31,6 @@ from overseer.maintenance.effects import EffectsCollector, EffectStats
 from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.maintenance.schedule import MaintenanceSchedule, open_schedule
 from overseer.model import FleetModel
-from overseer.model.events import EventSink
 from overseer.push.alertmanager_silences import AlertmanagerSilences
 from overseer.push.icinga2_metrics import PushCollector
 from overseer.push.icinga2_push import Icinga2Push
@@ -53,15 +52,16 @@ log = logging.getLogger(__name__)
 
 
 def open_fleet(
-    config: Config, events: EventSink | None, start: Callable[[], FleetStart]
+    config: Config, history: EventHistory | None, start: Callable[[], FleetStart]
 ) -> LocalFleet | PooledFleet:
     """The fleet `config` asks for: ingested in this process with one worker, by a pool with more.
 
-    `start` tells what it follows before it hears anything (asked again for each worker restarted).
+    Its events go to `history`; `start` tells what it follows before it hears anything (asked again for
+    each worker restarted).
     """
     if config.ingest.workers == 1:
-        return LocalFleet.build(config, events, start())
-    return PooledFleet(config, events, start)
+        return LocalFleet.build(config, None if history is None else history.store.add, start())
+    return PooledFleet(config, None if history is None else history.store.add_rows, start)
 
 
 @dataclass
@@ -89,7 +89,7 @@ class Exporter:
         events = None if self.history is None else self.history.store.add
         self.memory = RobotMemory(RobotRegistry(config.events.path))
         self.fleet = open_fleet(
-            config, events, lambda: FleetStart(self.inventory.inventory, self.memory.remembered())
+            config, self.history, lambda: FleetStart(self.inventory.inventory, self.memory.remembered())
         )
         self.inventory.follow_with(self.fleet.set_inventory)
         self.maintenance = open_schedule(config.maintenance, config.events.path, events)

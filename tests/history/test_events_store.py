@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
 import sqlite3
 import subprocess
@@ -19,7 +20,7 @@ from overseer.history.metrics import EventsCollector
 from overseer.history.query import EventQuery, decode_cursor
 from overseer.history.store import MAX_ROWS_PER_STATEMENT, EventStore, EventsUnavailable, StoreSettings
 from overseer.levels import Level
-from overseer.model.events import Event
+from overseer.model.events import Event, event_of_row, event_rows
 
 DAY = 86400.0
 HOSTILE = [
@@ -225,6 +226,23 @@ def test_hostile_strings_are_stored_and_returned_intact(tmp_path: Path) -> None:
     assert [e["values"] for e in returned] == [[{"key": t, "value": t}] for t in HOSTILE]
     assert [e["robot"] for e in returned] == [t or "r" for t in HOSTILE]
     assert [e["robot"] for e in reopened.query(EventQuery(robot='quote"d'))[0]] == ['quote"d']
+
+
+def test_rows_sent_through_a_pipe_are_stored_as_the_events_they_came_from(tmp_path: Path) -> None:
+    # An ingest worker sends its events as rows; the exporter's store writes them as it writes events.
+    events = [
+        Event(1000.0 + i, text or "r", "level", text, text, Level.OK, Level.WARN, text, ((text, text),))
+        for i, text in enumerate(HOSTILE)
+    ] + [Event(2000.0, "robot1", "robot_down", message="silent"), level_event(2001.0)]
+    assert [event_of_row(row) for row in event_rows(events)] == events
+    sent, received = multiprocessing.Pipe(duplex=False)
+    received.send(event_rows(events))
+    direct = EventStore(settings(tmp_path / "direct.db"))
+    piped = EventStore(settings(tmp_path / "piped.db"))
+    direct.add(events)
+    piped.add_rows(sent.recv())
+    assert direct.flush() == piped.flush() == len(events)
+    assert direct.query(EventQuery())[0] == piped.query(EventQuery())[0]
 
 
 def test_events_survive_a_restart_and_ids_keep_growing_after_pruning(tmp_path: Path) -> None:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import logging
 import math
 import os
@@ -35,8 +34,7 @@ from typing import Any
 
 from overseer.database import claim
 from overseer.history.query import EventQuery, encode_cursor
-from overseer.levels import Level
-from overseer.model.events import Event
+from overseer.model.events import Event, EventRow, event_of_row, event_rows
 
 log = logging.getLogger(__name__)
 event_log = logging.getLogger("overseer.events")
@@ -72,9 +70,6 @@ _INSERT = (
 _ROW = "(?, ?, ?, ?, ?, ?, ?, ?, ?)"
 _FIELDS = _ROW.count("?")
 MAX_ROWS_PER_STATEMENT = 2_000
-_LEVELS = tuple(Level)
-_NO_VALUES = "[]"
-_quote = json.encoder.encode_basestring_ascii  # json.dumps's own, without its per-call setup (2 µs an event)
 
 
 class EventsUnavailable(RuntimeError):
@@ -109,7 +104,7 @@ class EventStore:
         """Open (or create) the database at `settings.path`; on failure the store runs degraded."""
         self.settings = settings
         self._clock = clock
-        self._queue: list[list[Event]] = []
+        self._queue: list[list[EventRow]] = []
         self._queued = 0
         self._queue_lock = threading.Lock()
         self._write_lock = threading.Lock()
@@ -144,22 +139,27 @@ class EventStore:
 
     def add(self, events: list[Event]) -> None:
         """Queue events for the writer; drops (and counts) what does not fit in the queue."""
-        if not events:
+        if events:
+            self.add_rows(event_rows(events))
+
+    def add_rows(self, rows: list[EventRow]) -> None:
+        """Queue events as rows (`event_rows`) for the writer; drops (and counts) what does not fit."""
+        if not rows:
             return
         if self._writer is None:
             with self._queue_lock:
-                self._dropped["store_unavailable"] += len(events)
-            self._log(events, None)  # a log shipper still gets them
+                self._dropped["store_unavailable"] += len(rows)
+            self._log(rows, None)  # a log shipper still gets them
             return
         with self._queue_lock:
             room = self.settings.queue_limit - self._queued
-            if room < len(events):
-                self._dropped["queue_full"] += len(events) - max(room, 0)
-                events = events[: max(room, 0)]
-                if not events:
+            if room < len(rows):
+                self._dropped["queue_full"] += len(rows) - max(room, 0)
+                rows = rows[: max(room, 0)]
+                if not rows:
                     return
-            self._queue.append(events)
-            self._queued += len(events)
+            self._queue.append(rows)
+            self._queued += len(rows)
 
     def start(self) -> None:
         """Start the writer thread (nothing to do when the database could not be opened)."""
@@ -191,11 +191,11 @@ class EventStore:
         """Write everything queued now, in the calling thread; returns how many events were written."""
         with self._queue_lock:
             batches, self._queue, self._queued = self._queue, [], 0
-        events = [event for batch in batches for event in batch]
-        if not events:
+        rows = [row for batch in batches for row in batch]
+        if not rows:
             return 0
         with self._write_lock:
-            return self._write(events)
+            return self._write(rows)
 
     def prune(self) -> int:
         """Delete events older than the retention, and the oldest beyond the size cap; returns how many."""
@@ -267,25 +267,25 @@ class EventStore:
             if time.monotonic() - self._last_prune >= PRUNE_INTERVAL_SECONDS:
                 self.prune()
 
-    def _write(self, events: list[Event]) -> int:
+    def _write(self, rows: list[EventRow]) -> int:
         writer = self._writer
         if writer is None:
             with self._queue_lock:
-                self._dropped["store_unavailable"] += len(events)
+                self._dropped["store_unavailable"] += len(rows)
             return 0
         try:
             writer.execute("BEGIN IMMEDIATE")  # the write lock first: the ids read next stay ours
             first = _sequence(writer) if self.settings.log_events else 0
             per_statement = self._rows_per_statement
-            for start in range(0, len(events), per_statement):
-                chunk = events[start : start + per_statement]
-                writer.execute(insert_statement(len(chunk)), _fields(chunk))
+            for start in range(0, len(rows), per_statement):
+                chunk = rows[start : start + per_statement]
+                writer.execute(insert_statement(len(chunk)), [field for row in chunk for field in row])
             writer.execute("COMMIT")
         except sqlite3.Error as error:
             if writer.in_transaction:
                 writer.execute("ROLLBACK")
             with self._queue_lock:
-                self._dropped["write_error"] += len(events)
+                self._dropped["write_error"] += len(rows)
             self._writing_ok = False
             if time.monotonic() - self._last_write_error > 60:  # one line a minute while it lasts
                 log.error(
@@ -293,28 +293,28 @@ class EventStore:
                     "overseer_events_dropped_total)",
                     self.settings.path,
                     error,
-                    len(events),
+                    len(rows),
                 )
             self._last_write_error = time.monotonic()
-            self._log(events, None)
+            self._log(rows, None)
             return 0
         self._writing_ok = True
         with self._queue_lock:
-            self._written += len(events)
-        self._log(events, first)
+            self._written += len(rows)
+        self._log(rows, first)
         if self._used_bytes(writer) > self.settings.max_size:
             deleted = self._prune_to_size(writer)
             if deleted:
                 writer.execute("PRAGMA incremental_vacuum")
-        return len(events)
+        return len(rows)
 
-    def _log(self, events: list[Event], last_id_before: int | None) -> None:
+    def _log(self, rows: list[EventRow], last_id_before: int | None) -> None:
         """Log each event as one line when asked to (JSON logs); with ids when they were stored."""
         if not self.settings.log_events:
             return
-        for offset, event in enumerate(events, start=1):
+        for offset, row in enumerate(rows, start=1):
             event_id = None if last_id_before is None else last_id_before + offset
-            event_log.info("event", extra={"event": event.document(event_id)})
+            event_log.info("event", extra={"event": event_of_row(row).document(event_id)})
 
     def _used_bytes(self, writer: sqlite3.Connection) -> int:
         pages = writer.execute("PRAGMA page_count").fetchone()[0]
@@ -347,32 +347,6 @@ def _statement_rows(connection: sqlite3.Connection) -> int:
 def insert_statement(rows: int) -> str:
     """The INSERT of `rows` events (one text for full chunks, so sqlite3 reuses its prepared statement)."""
     return _INSERT + ", ".join([_ROW] * rows)
-
-
-def _fields(events: list[Event]) -> list[object]:
-    """The values bound to one INSERT of `events`, row after row."""
-    fields: list[object] = []
-    add = fields.extend
-    for time_, robot, kind, component, hardware_id, old_level, new_level, message, values in events:
-        add(
-            (
-                time_,
-                robot,
-                kind,
-                component,
-                hardware_id,
-                None if old_level is None else int(old_level),
-                None if new_level is None else int(new_level),
-                message,
-                _values_json(values) if values else _NO_VALUES,
-            )
-        )
-    return fields
-
-
-def _values_json(values: tuple[tuple[str, str], ...]) -> str:
-    """`json.dumps(values)` without spaces: a list of [key, value] pairs."""
-    return "[" + ",".join(["[" + _quote(key) + "," + _quote(value) + "]" for key, value in values]) + "]"
 
 
 def _sequence(writer: sqlite3.Connection) -> int:
@@ -419,16 +393,5 @@ def _describe_open_error(path: str, error: BaseException) -> str:
 
 
 def _document(row: tuple[Any, ...]) -> dict[str, Any]:
-    event_id, at, robot, kind, component, hardware_id, old_level, new_level, message, values = row
-    event = Event(
-        at,
-        robot,
-        kind,
-        component,
-        hardware_id,
-        None if old_level is None else _LEVELS[old_level],
-        None if new_level is None else _LEVELS[new_level],
-        message,
-        tuple((key, value) for key, value in json.loads(values)),
-    )
-    return event.document(event_id)
+    event_id, *stored = row
+    return event_of_row(tuple(stored)).document(event_id)

@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
 from overseer.fleet.workers.process import FAILED, READY, run_worker
-from overseer.model.events import Event
+from overseer.model.events import EventRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
 
 log = logging.getLogger(__name__)
@@ -28,8 +28,6 @@ START_TIMEOUT_SECONDS = 60.0
 ANSWER_TIMEOUT_SECONDS = 30.0  # a worker that takes longer to answer is taken for hung and restarted
 SUPERVISE_INTERVAL_SECONDS = 0.2
 RESTART_DELAY_SECONDS = 1.0  # at most one restart a second per worker, so a crashing one cannot spin
-
-EventSink = Callable[[list[Event]], None]
 
 
 class Answer(NamedTuple):
@@ -67,11 +65,11 @@ class WorkerPool:
     def __init__(
         self,
         config: Config,
-        events: EventSink | None = None,
+        events: EventRowSink | None = None,
         start: Callable[[], FleetStart] | None = None,
         relay: ZenohRelay | None = None,
     ) -> None:
-        """Prepare the workers of `config`; `events` receives every worker's events (None: dropped).
+        """Prepare the workers of `config`; `events` receives every worker's events as rows (None: dropped).
 
         `start` tells what a worker follows before it hears anything, asked anew for each worker started
         (a restarted worker follows the inventory and the robots remembered now); `relay`, when given,
