@@ -2,22 +2,36 @@
 
 from __future__ import annotations
 
+import secrets
 import threading
 from array import array
 from itertools import pairwise
 from typing import NamedTuple
+
+import xxhash
 
 from overseer.codec import DecodeError, compiled
 from overseer.codec.wire import StatusReader, WireFormat, decode_laid_out
 from overseer.ingest.scan import scan_compiled, scan_python
 from overseer.model import FleetModel
 
+_FINGERPRINT_SEED = secrets.randbits(64)  # per process, as Python's hash is
+
+
+def _fingerprint(payload: bytes, start: int) -> int:
+    """A 64-bit hash of `payload` from `start` on: XXH3, seeded, without copying the bytes.
+
+    Every message is hashed whole to tell a republished array at once (5 kB at 50 components): XXH3
+    reads it in 0.3 µs where Python's SipHash of a copy took 1.9.
+    """
+    return xxhash.xxh3_64_intdigest(memoryview(payload)[start:], _FINGERPRINT_SEED)
+
 
 class _Layout(NamedTuple):
     """Where the statuses of the last payload applied lay, and a hash of each."""
 
     revision: int  # the feed's revision that payload made
-    fingerprint: int  # hash of the bytes after the stamp
+    fingerprint: int  # `_fingerprint` of the bytes after the stamp
     prefix: bytes  # the bytes before the stamp (the encapsulation header)
     head_hash: int  # hash of the bytes between the stamp and the first status
     bounds: array[int]  # where each status began, then where the last one ended
@@ -33,8 +47,10 @@ class PayloadIngest:
     Most other arrays differ from the last one in a few statuses (a voltage, a temperature): a status
     whose bytes hash as they did, at an offset that keeps the format's alignment, decodes as it did, so
     only the others are decoded and applied. Hashes, not the payload, are kept: the payload would cost
-    about 90 bytes a component, a tenth of the memory budget. The hashes are Python's keyed 64-bit
-    SipHash (seeded per process), so no robot can aim a collision.
+    about 90 bytes a component, a tenth of the memory budget. The statuses' hashes are Python's keyed
+    64-bit SipHash and the whole payload's a seeded XXH3 (both seeded per process). XXH3 is no keyed
+    function: a robot could in principle craft an array taken for its last one, which hides only what
+    that robot itself reports, as its own false statuses could.
     With the compiled decoder, the comparison and the decoding of what changed run in C
     (`scan.scan_compiled`, the same hashes); `scan.scan_python` is the pure-Python reference.
     """
@@ -61,7 +77,7 @@ class PayloadIngest:
     def __call__(self, payload: bytes) -> None:
         """Apply one payload; DecodeError (counted as decode_error) when it is not a DiagnosticArray."""
         start, stop = self._wire.stamp
-        fingerprint = hash(payload[stop:])
+        fingerprint = _fingerprint(payload, stop)
         with self._lock:
             layout, self._layout = self._layout, None
             try:

@@ -17,7 +17,6 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
-from dataclasses import replace
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -165,7 +164,7 @@ class FleetModel:
             old = feeds[index]
             if None in old.latest or (revision is not None and old.revision != revision):
                 return False
-            current = _learned(old, now, True)
+            current = _learned(old, now, True, old.revision)
             bound_changed = current.period != old.period and feed_stale_after(
                 self.limits, current
             ) != feed_stale_after(self.limits, old)
@@ -227,8 +226,8 @@ class FleetModel:
             else:
                 old_feed = feeds[position]
                 merge.left_out(old_feed)
-                learned = _learned(old_feed, now, old_feed.latest == latest)
-                new_feed = learned._replace(latest=latest, revision=old_feed.revision + 1)
+                learned = _learned(old_feed, now, old_feed.latest == latest, old_feed.revision + 1)
+                new_feed = learned._replace(latest=latest)
                 feeds[position] = new_feed
             components = merge.components
             if merge.added and state.listing is not None:
@@ -292,7 +291,7 @@ class FleetModel:
             if old.revision != revision or None in latest:
                 return None
             in_latest = len(latest)
-            components = dict(state.components)
+            components = state.components.copy()  # the dict's own copy, not one key at a time
             listener = self._level_listener
             changes: list[LevelChange] = []
             intern, new = sys.intern, tuple.__new__
@@ -326,7 +325,7 @@ class FleetModel:
                 )
                 if listener is not None and current.level is not previous.level:
                     changes.append(LevelChange(previous, current))
-            current_feed = _learned(old, now, True)._replace(revision=revision + 1)
+            current_feed = _learned(old, now, True, revision + 1)
             self._robots[robot] = RobotState(
                 robot,
                 transport,
@@ -355,7 +354,7 @@ class FleetModel:
         with self._lock:
             state = self._robots.get(robot)
             if state is not None and state.publisher_alive:
-                self._robots[robot] = replace(state, left_at=now, revision=state.revision + 1)
+                self._robots[robot] = state._replace(left_at=now, revision=state.revision + 1)
 
     def forget_topic(self, robot: str, topic: str) -> None:
         """Drop the components a robot reported on `topic` (when it turns out to publish a better one)."""
@@ -534,7 +533,7 @@ class _Merge:
         changes: list[LevelChange] | None,
         clashed: set[str],
     ) -> None:
-        self.components = dict(state.components)
+        self.components = state.components.copy()
         self._feed = feed
         self._now = now
         self._limits = limits
@@ -639,6 +638,7 @@ class _Merge:
         return frozenset(missing) if missing else _NONE_MISSING
 
 
+_new_tuple = tuple.__new__  # builds a named tuple without the Python call of its own __new__
 _NONE_MISSING: frozenset[ComponentKey] = frozenset()
 _NONE_FORGOTTEN: dict[str, Forgetting] = {}
 _FORGETTINGS_KEPT = 10_000  # enough for every robot forgotten between two checks of the detector
@@ -670,17 +670,19 @@ def _feed_index(feeds: tuple[Feed, ...], name: str) -> int | None:
     return None
 
 
-def _learned(feed: Feed, now: float, same_components: bool) -> Feed:
-    """`feed` after a message at `now`, the interval learned when the message carried what the last did.
+def _learned(feed: Feed, now: float, same_components: bool, revision: int) -> Feed:
+    """`feed` after a message at `now`, at `revision`, the interval learned when it carried what the last did.
 
     An interval under a quarter of the period known is a burst (a forced update), not a period; the
     period is the upper median of the last `PERIOD_SAMPLES` intervals, so one late message does not move it.
+    Built with `tuple.__new__`, not `_replace`: every message goes through here.
     """
-    interval = now - feed.last_message
-    if not same_components or interval <= 0.0 or interval < feed.period / 4:
-        return feed._replace(last_message=now)
-    intervals = (*feed.intervals[-(PERIOD_SAMPLES - 1) :], interval)
-    return feed._replace(last_message=now, intervals=intervals, period=sorted(intervals)[len(intervals) // 2])
+    name, topic, last_message, latest, _, period, intervals = feed
+    interval = now - last_message
+    if same_components and interval > 0.0 and interval >= period / 4:
+        intervals = (*intervals[-(PERIOD_SAMPLES - 1) :], interval)
+        period = sorted(intervals)[len(intervals) // 2]
+    return _new_tuple(Feed, (name, topic, now, latest, revision, period, intervals))
 
 
 def _prepare(
@@ -805,8 +807,7 @@ def _replace_components(
         for feed in state.feeds
         if feed.name in carried
     )
-    return replace(
-        state,
+    return state._replace(
         components=MappingProxyType(components),
         revision=state.revision + 1,
         feeds=feeds,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from overseer.levels import Level
@@ -72,8 +72,8 @@ def is_stand_in(component: Component) -> bool:
 def listed_state(state: RobotState, listing: ListedRobot | None, now: float) -> RobotState:
     """`state` with `listing` as its entry of the inventory, and the stand-ins its expectations need."""
     components = expected_components(listing, state.components, now)
-    return replace(
-        state, listing=listing, components=MappingProxyType(components), revision=state.revision + 1
+    return state._replace(
+        listing=listing, components=MappingProxyType(components), revision=state.revision + 1
     )
 
 

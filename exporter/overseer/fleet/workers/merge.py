@@ -5,7 +5,6 @@ from __future__ import annotations
 import heapq
 import threading
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import replace
 from types import MappingProxyType
 from typing import Any
 
@@ -97,7 +96,7 @@ def _add(total: dict[Any, Any], counts: Any) -> None:
 
 
 def _with_components(robot: RobotState, components: Any) -> RobotState:
-    return replace(robot, components=components)
+    return robot._replace(components=components)
 
 
 CounterKey = tuple[Any, ...]

@@ -44,7 +44,13 @@ ATTRIBUTION_GRACE_SECONDS = 3.0  # a publisher with no token by then (another rm
 MAX_TOKENS_PER_ROBOT = 64
 MAX_PENDING_PUBLISHERS = 10_000
 MAX_PENDING_SAMPLES = 16  # per publisher, while its robot is not known yet
-MAX_FOREIGN_KEYS = 100_000  # keys remembered as another shard's (bounded against key floods)
+MAX_KNOWN_KEYS = 100_000  # keys remembered, ours or another shard's (bounded against key floods)
+
+
+# What a key says: its topic and the robot its namespace names (None: its publisher's node decides), or
+# (None, None) for a key of another shard's robot or of no robot's diagnostics.
+_KeyReading = tuple[DiagnosticsKey | None, str | None]
+_NOT_OURS: _KeyReading = (None, None)
 
 
 @dataclass
@@ -83,7 +89,8 @@ class ZenohIngest:
         self._ingests: dict[tuple[str, str, bytes], PayloadIngest | None] = {}
         # robot → its feeds in `_ingests`: a new feed looks at its robot's, not at the whole fleet's
         self._feeds_of: dict[str, list[tuple[str, str, bytes]]] = {}
-        self._foreign: set[str] = set()  # keys of robots another shard follows: a set lookup each
+        # A key is read once, not at every sample (10,000 a second in a large fleet).
+        self._keys: dict[str, _KeyReading] = {}
         self._tokens: dict[str, set[str]] = {}  # robot → live tokens of its diagnostics publishers
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
         self._gaps = SequenceGaps()  # by publisher GID: what each sent and this exporter never heard
@@ -115,19 +122,9 @@ class ZenohIngest:
             self._gaps.heard(gid, sequence)
 
     def _apply(self, key: str, attachment: bytes | None, payload: bytes) -> None:
-        if key in self._foreign:
-            return
-        try:
-            parsed = parse_data_key(key, self._config.domain)
-        except RejectedKey as rejected:
-            self.count_source_error(str(rejected))
-            log.debug("ignoring Zenoh key %r: %s", key, rejected)
-            return
-        robot = self._naming.of_topic(parsed.namespace)
-        if robot is not None and not self._shard.owns(robot):
-            if len(self._foreign) < MAX_FOREIGN_KEYS:
-                self._foreign.add(key)
-            return
+        parsed, robot = self._keys.get(key) or self._read_key(key)
+        if parsed is None:
+            return  # another shard's robot, or not a robot's diagnostics
         if parsed.key_format == RMW_ZENOH and parsed.type_hash != DIAGNOSTIC_ARRAY_HASH:
             # Another revision of the message: read anyway (the codec checks every byte), but say so.
             self._model.count_source_error(TRANSPORT, "type_hash_mismatch")
@@ -145,6 +142,20 @@ class ZenohIngest:
             if sequence is not None:
                 self._count_lost(robot, parsed, gid, sequence)
             ingest(payload)
+
+    def _read_key(self, key: str) -> _KeyReading:
+        """What a key says (remembered, up to a bound); one that is no robot's is counted each time."""
+        try:
+            parsed = parse_data_key(key, self._config.domain)
+        except RejectedKey as rejected:
+            self.count_source_error(str(rejected))
+            log.debug("ignoring Zenoh key %r: %s", key, rejected)
+            return _NOT_OURS
+        robot = self._naming.of_topic(parsed.namespace)
+        reading = _NOT_OURS if robot is not None and not self._shard.owns(robot) else (parsed, robot)
+        if len(self._keys) < MAX_KNOWN_KEYS:
+            self._keys[key] = reading
+        return reading
 
     def _count_lost(self, robot: str, parsed: DiagnosticsKey, gid: bytes, sequence: int) -> None:
         """Count the samples a publisher sent before `sequence` and this exporter never heard."""
