@@ -162,7 +162,7 @@ class FleetModel:
             if index is None:
                 return False
             old = feeds[index]
-            if None in old.latest or (revision is not None and old.revision != revision):
+            if not old.lossless or (revision is not None and old.revision != revision):
                 return False
             current = _learned(old, now, True, old.revision)
             bound_changed = current.period != old.period and feed_stale_after(
@@ -221,13 +221,13 @@ class FleetModel:
             merge = _Merge(state, feed_name, now, limits, changes, self._clashed.setdefault(robot, set()))
             latest = merge.statuses(prepared, dropped)
             if position is None:
-                new_feed = Feed(feed_name, topic, now, latest)
+                new_feed = Feed(feed_name, topic, now, latest, lossless=None not in latest)
                 feeds.append(new_feed)
             else:
                 old_feed = feeds[position]
                 merge.left_out(old_feed)
-                learned = _learned(old_feed, now, old_feed.latest == latest, old_feed.revision + 1)
-                new_feed = learned._replace(latest=latest)
+                learned = _learned(old_feed, now, old_feed.latest == latest, old_feed.revision)
+                new_feed = learned.with_latest(latest, old_feed.revision + 1)
                 feeds[position] = new_feed
             components = merge.components
             if merge.added and state.listing is not None:
@@ -288,7 +288,7 @@ class FleetModel:
             wall = now + offset
             old = feeds[index]
             latest = old.latest
-            if old.revision != revision or None in latest:
+            if old.revision != revision or not old.lossless:
                 return None
             in_latest = len(latest)
             components = state.components.copy()  # the dict's own copy, not one key at a time
@@ -627,7 +627,7 @@ class _Merge:
             taken = self._taken_over.get(feed.name)
             if taken:
                 latest = tuple(None if key in taken else key for key in feed.latest)
-                feed = feed._replace(latest=latest, revision=feed.revision + 1)
+                feed = feed.with_latest(latest, feed.revision + 1)
             settled.append(feed)
         return tuple(settled)
 
@@ -677,12 +677,12 @@ def _learned(feed: Feed, now: float, same_components: bool, revision: int) -> Fe
     period is the upper median of the last `PERIOD_SAMPLES` intervals, so one late message does not move it.
     Built with `tuple.__new__`, not `_replace`: every message goes through here.
     """
-    name, topic, last_message, latest, _, period, intervals = feed
+    name, topic, last_message, latest, _, period, intervals, lossless = feed
     interval = now - last_message
     if same_components and interval > 0.0 and interval >= period / 4:
         intervals = (*intervals[-(PERIOD_SAMPLES - 1) :], interval)
         period = sorted(intervals)[len(intervals) // 2]
-    return _new_tuple(Feed, (name, topic, now, latest, revision, period, intervals))
+    return _new_tuple(Feed, (name, topic, now, latest, revision, period, intervals, lossless))
 
 
 def _prepare(
@@ -800,10 +800,7 @@ def _replace_components(
     components = expected_components(state.listing, components, now)
     carried = {component.feed for component in components.values()}
     feeds = tuple(
-        feed._replace(
-            latest=tuple(key if key in components else None for key in feed.latest),
-            revision=feed.revision + 1,
-        )
+        feed.with_latest(tuple(key if key in components else None for key in feed.latest), feed.revision + 1)
         for feed in state.feeds
         if feed.name in carried
     )

@@ -121,7 +121,8 @@ class Feed(NamedTuple):
 
     `latest` holds, in the message's order, the component each status of the feed's latest message went
     to, or None where the status lost something (dropped, cut short, a repeated name) or another feed
-    took the component over: an ingest may then apply only the statuses that changed. `revision` counts
+    took the component over: an ingest may then apply only the statuses that changed, and only while
+    `lossless` (no None in `latest`, kept beside it so that no message looks for one). `revision` counts
     the changes an ingest's memory of the feed depends on. `period` is the median of the last intervals
     between messages that carried the same components (0.0 until one is known): start-up arrays and
     other partial ones do not count.
@@ -134,6 +135,11 @@ class Feed(NamedTuple):
     revision: int = 0
     period: float = 0.0
     intervals: tuple[float, ...] = ()
+    lossless: bool = True
+
+    def with_latest(self, latest: tuple[ComponentKey | None, ...], revision: int) -> Feed:
+        """This feed with another latest message's components, at `revision`."""
+        return self._replace(latest=latest, revision=revision, lossless=None not in latest)
 
 
 ForgetReason = Literal["expired", "retired", "unlisted"]
