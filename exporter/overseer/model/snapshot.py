@@ -66,11 +66,12 @@ class FleetSnapshot:
     def robot_up(self, robot: RobotState) -> bool:
         """True while the robot's messages arrive within its timeout, and since its publisher's departure."""
         last = robot.last_message
-        return (
-            last is not None
-            and (robot.left_at is None or last > robot.left_at)
-            and self.taken_at - last <= robot_timeout(self.limits, robot)
-        )
+        if last is None or (robot.left_at is not None and last <= robot.left_at):
+            return False
+        silent = self.taken_at - last
+        # Within the shortest timeout any robot has, the robot's own (longer for a slow one) need not be
+        # worked out: almost every robot, at every look.
+        return silent <= self.limits.robot_timeout or silent <= robot_timeout(self.limits, robot)
 
     def went_down_at(self, robot: RobotState) -> float:
         """When a robot that is down went down (monotonic).
