@@ -108,6 +108,8 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
         if (fields[i] == NULL) {
             goto fail;
         }
+        /* Robots of one fleet repeat the same names, messages and hardware_ids: the model keeps one. */
+        PyUnicode_InternInPlace(&fields[i]);
     }
     pos = aligned(r, pos);
     if (pos + 4 > r->end) {
@@ -133,6 +135,7 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
         if (key == NULL) {
             goto fail;
         }
+        PyUnicode_InternInPlace(&key); /* keys repeat too; values (measurements) mostly do not */
         PyObject *value = read_string(r, &pos);
         if (value == NULL) {
             Py_DECREF(key);

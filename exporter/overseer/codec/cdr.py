@@ -9,6 +9,7 @@ exactly like XCDR1.
 from __future__ import annotations
 
 import struct
+from sys import intern  # names, messages, hardware_ids and keys repeat across a fleet: one copy each
 
 from overseer.codec import compiled
 from overseer.codec.errors import DecodeError
@@ -79,6 +80,7 @@ def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[nam
         name, pos = read_string(payload, pos + 1, end, u32)
         message, pos = read_string(payload, pos, end, u32)
         hardware_id, pos = read_string(payload, pos, end, u32)
+        name, message, hardware_id = intern(name), intern(message), intern(hardware_id)
         pos = (pos + 3) & ~3
         if pos + 4 > end:
             raise DecodeError("payload ends before a values sequence")
@@ -90,7 +92,7 @@ def _status_reader(u32: struct._UnpackFrom) -> StatusReader:  # type: ignore[nam
         for _ in range(value_count):
             key, pos = read_string(payload, pos, end, u32)
             value, pos = read_string(payload, pos, end, u32)
-            values.append((key, value))
+            values.append((intern(key), value))
         return DiagnosticStatus(level, name, message, hardware_id, tuple(values)), pos
 
     return read_status

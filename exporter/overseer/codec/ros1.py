@@ -9,6 +9,7 @@ garbled TCPROS frame ends in `DecodeError` rather than in a half-true message.
 from __future__ import annotations
 
 import struct
+from sys import intern  # names, messages, hardware_ids and keys repeat across a fleet: one copy each
 
 from overseer.codec import compiled
 from overseer.codec.errors import DecodeError
@@ -53,12 +54,13 @@ def read_status(payload: bytes, pos: int, end: int) -> tuple[DiagnosticStatus, i
     name, pos = _read_string(payload, pos + 1, end)
     message, pos = _read_string(payload, pos, end)
     hardware_id, pos = _read_string(payload, pos, end)
+    name, message, hardware_id = intern(name), intern(message), intern(hardware_id)
     value_count, pos = _read_count(payload, pos, end, _MIN_KEY_VALUE_BYTES, "value")
     values: list[tuple[str, str]] = []
     for _ in range(value_count):
         key, pos = _read_string(payload, pos, end)
         value, pos = _read_string(payload, pos, end)
-        values.append((key, value))
+        values.append((intern(key), value))
     return DiagnosticStatus(level, name, message, hardware_id, tuple(values)), pos
 
 

@@ -12,7 +12,6 @@ its robot reports under one name (`state.ComponentKey`), whichever feed reported
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 from collections import Counter
@@ -294,7 +293,7 @@ class FleetModel:
             components = state.components.copy()  # the dict's own copy, not one key at a time
             listener = self._level_listener
             changes: list[LevelChange] = []
-            intern, new = sys.intern, tuple.__new__
+            new = tuple.__new__
             # Written for speed (arrays that changed in every status come through here): the checks and
             # the merge of `_prepare` and `_Merge.status`, on statuses `_intact` found within every limit.
             for position, (wire_level, name, message, hardware_id, values) in changed:
@@ -315,9 +314,9 @@ class FleetModel:
                     (
                         previous.key,
                         level,
-                        intern(message),
-                        previous.hardware_id if same_id else intern(hardware_id),
-                        previous.values if same_values else tuple([(intern(k), v) for k, v in values]),
+                        message,  # interned by the decoder, as hardware_id and the keys are
+                        previous.hardware_id if same_id else hardware_id,
+                        previous.values if same_values else values,
                         now,
                         previous.level_changes + (previous.level is not level),
                         feed,
@@ -573,7 +572,6 @@ class _Merge:
                     dropped["component_limit"] += 1
                     latest.append(None)
                     continue
-                key = (sys.intern(name), sys.intern(key[1]))
                 current = _component(key, level, message, hardware_id, values, self._now, 0, self._feed)
                 if self._changes is not None:
                     self._changes.append(LevelChange(None, current))
@@ -749,18 +747,9 @@ def _component(
     changes: int,
     feed: str,
 ) -> Component:
-    # Robots of one fleet repeat the same messages and keys: interning stores each text once.
-    intern = sys.intern
-    return Component(
-        key,
-        level,
-        intern(message),
-        intern(hardware_id),
-        tuple([(intern(k), v) for k, v in values]),
-        now,
-        changes,
-        feed,
-    )
+    # The texts come interned from the decoders (robots of one fleet repeat the same messages and keys),
+    # so each is stored once across the fleet with no work here.
+    return _new_tuple(Component, (key, level, message, hardware_id, values, now, changes, feed))
 
 
 def _merged(

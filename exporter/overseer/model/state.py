@@ -138,7 +138,7 @@ class Feed(NamedTuple):
     lossless: bool = True
 
     def with_latest(self, latest: tuple[ComponentKey | None, ...], revision: int) -> Feed:
-        """This feed with another latest message's components, at `revision`."""
+        """The feed with another latest message's components, at `revision`."""
         return self._replace(latest=latest, revision=revision, lossless=None not in latest)
 
 
