@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import zenoh
 from rosbags.typesys import Stores, get_typestore
 
 from overseer.config import ConfigError, load_config
@@ -20,8 +21,10 @@ from overseer.sources.zenoh.keys import (
     attachment_fields,
     attachment_gid,
     bridge_key,
+    bridge_liveliness_subscription,
     bridge_publisher_token,
     data_key,
+    liveliness_subscription,
     parse_bridge_token,
     parse_data_key,
     parse_publisher,
@@ -94,6 +97,34 @@ def test_publisher_tokens_name_the_robot_and_other_tokens_are_ignored() -> None:
     unnamespaced = publisher_token(0, "abc", 1, "", "agg", "diagnostics", DIAGNOSTIC_ARRAY_HASH)
     assert parse_publisher_token(unnamespaced, 0) == DiagnosticsKey(
         "", "diagnostics", RMW_ZENOH, DIAGNOSTIC_ARRAY_HASH
+    )
+
+
+def test_the_token_subscriptions_match_every_diagnostics_publishers_token_and_no_other_type() -> None:
+    # Matched by Zenoh itself: the subscriptions name the type, with no wildcard inside a chunk.
+    def matched(subscription: str, token: str) -> bool:
+        return bool(zenoh.KeyExpr(subscription).intersects(zenoh.KeyExpr(token)))
+
+    rmw = liveliness_subscription(0)
+    tokens = [
+        publisher_token(
+            0, "abc", 12, "site_a/robot7", "aggregator", "diagnostics_agg", DIAGNOSTIC_ARRAY_HASH
+        ),
+        publisher_token(
+            0, "abc", 3, "robot_b", "driver", "diagnostics", DIAGNOSTIC_ARRAY_HASH, topic_namespace=""
+        ),
+        publisher_token(0, "abc", 4, "", "agg", "diagnostics", "RIHS01_" + "0" * 64),  # another revision
+    ]
+    assert all(matched(rmw, token) for token in tokens)
+    string_topic = tokens[0].replace(DIAGNOSTIC_ARRAY_TYPE, "std_msgs::msg::dds_::String_")
+    assert not matched(rmw, string_topic)
+    assert not matched(rmw, tokens[0].replace("/MP/", "/MS/"))  # a subscription
+    assert not matched(liveliness_subscription(1), tokens[0])
+    bridge = bridge_liveliness_subscription()
+    assert matched(bridge, bridge_publisher_token("f00d", "site_a/robot7", "diagnostics_agg"))
+    assert matched(bridge, bridge_publisher_token("f00d", "", "diagnostics"))
+    assert not matched(
+        bridge, bridge_publisher_token("f00d", "r", "diagnostics").replace("DiagnosticArray", "String")
     )
 
 

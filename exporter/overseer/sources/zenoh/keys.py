@@ -89,13 +89,19 @@ def followed_subscription(topic: DiagnosticsKey, domain: int) -> str:
 
 
 def liveliness_subscription(domain: int) -> str:
-    """The key expression of the liveliness tokens of every diagnostics publisher on `domain`."""
-    return f"{LIVELINESS_SPACE}/{domain}/*/*/*/{PUBLISHER_ENTITY}/*/*/*/$*diagnostics$*/**"
+    """The key expression of the liveliness tokens of every diagnostics publisher on `domain`.
+
+    It names the message type in its chunk and has no wildcard inside a chunk (`$*`): a router matches
+    every token it holds against the expression when the exporter subscribes with its history, and an
+    expression such as `$*diagnostics$*` made a router of 10,000 robots' 20,000 tokens spend 14 s of a
+    core on it, against 3.5 s (dropping samples meanwhile).
+    """
+    return f"{LIVELINESS_SPACE}/{domain}/*/*/*/{PUBLISHER_ENTITY}/*/*/*/*/{DIAGNOSTIC_ARRAY_TYPE}/*/*"
 
 
 def bridge_liveliness_subscription() -> str:
     """The key expression of the tokens zenoh-bridge-ros2dds declares for routed diagnostics publishers."""
-    return f"@/*/{LIVELINESS_SPACE}/{PUBLISHER_ENTITY}/$*diagnostics$*/**"
+    return f"@/*/{LIVELINESS_SPACE}/{PUBLISHER_ENTITY}/*/{BRIDGE_TYPE.replace('/', _BRIDGE_SLASH)}/*"
 
 
 def parse_data_key(key: str, domain: int) -> DiagnosticsKey:
