@@ -85,7 +85,7 @@ class Exporter:
         security = load_web_config(config.web.config_file)
         self.inventory = InventoryReloader(config.inventory.file)  # so must a bad inventory file
         if config.events.enabled:
-            self.history = EventHistory(config.events, config.log_format == "json")
+            self.history = EventHistory(config.events, config.log_format == "json", config.fleet.max_robots)
         events = None if self.history is None else self.history.store.add
         self.memory = RobotMemory(RobotRegistry(config.events.path))
         self.fleet = open_fleet(

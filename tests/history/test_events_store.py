@@ -16,9 +16,17 @@ import pytest
 from prometheus_client import generate_latest
 from prometheus_client.registry import CollectorRegistry
 
+from overseer.config.events import EventsConfig
 from overseer.history.metrics import EventsCollector
 from overseer.history.query import EventQuery, decode_cursor
-from overseer.history.store import MAX_ROWS_PER_STATEMENT, EventStore, EventsUnavailable, StoreSettings
+from overseer.history.service import EventHistory
+from overseer.history.store import (
+    DEFAULT_QUEUE_LIMIT,
+    MAX_ROWS_PER_STATEMENT,
+    EventStore,
+    EventsUnavailable,
+    StoreSettings,
+)
 from overseer.levels import Level
 from overseer.model.events import Event, event_of_row, event_rows
 
@@ -309,6 +317,18 @@ def test_a_full_queue_drops_and_counts(tmp_path: Path) -> None:
     stats = store.stats()
     assert stats.dropped["queue_full"] == 31 and stats.written == 100
     assert 'overseer_events_dropped_total{reason="queue_full"} 31.0' in metrics(store)
+
+
+def test_the_exporters_queue_holds_a_whole_fleet_first_heard(tmp_path: Path) -> None:
+    # 10,000 robots of 50 components first heard at once: 500,000 `appeared` events before any is written.
+    history = EventHistory(EventsConfig(path=str(tmp_path / "events.db")), max_robots=10_000)
+    store = history.store
+    store.add_rows(event_rows([level_event(1000.0 + i / 1000) for i in range(1000)]) * 500)
+    assert store.stats().dropped["queue_full"] == 0
+    assert EventHistory(
+        EventsConfig(path=str(tmp_path / "small.db")), max_robots=10
+    ).store.settings.queue_limit == (DEFAULT_QUEUE_LIMIT)
+    store.stop()
 
 
 def test_a_corrupt_file_degrades_the_store_and_says_so(

@@ -31,7 +31,7 @@ class ZenohConfig:
     key_formats: tuple[str, ...] = ZENOH_KEY_FORMATS
     robot_name: str | None = None  # for diagnostics topics without a namespace (default "domain<N>")
     multicast_scouting: bool = False
-    queue_length: int = DEFAULT_QUEUE_LENGTH  # samples waiting for the ingest (a subscription's, a worker's)
+    queue_length: int = DEFAULT_QUEUE_LENGTH  # samples waiting (a subscription's; a worker's, relayed)
     shared_memory: bool = False  # take part in Zenoh's shared memory with sessions on the same host
 
     @property
@@ -100,11 +100,12 @@ OPTIONS: tuple[Option, ...] = (
     option(
         "zenoh.queue_length",
         f"{DEFAULT_QUEUE_LENGTH}",
-        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds. With "
-        "one ingest worker, per subscription (two topics per key format); beyond, Zenoh waits and the "
-        "router drops what does not fit (counted as lost where rmw_zenoh numbers it). With several, per "
-        "worker; beyond, they are dropped and counted. Each holds its payload while it waits (about 5 kB "
-        "at 50 components): the memory it may take is this many times the largest sample",
+        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds: per "
+        "subscription of the exporter's session (two topics per key format), where beyond it Zenoh waits "
+        "and the router drops what does not fit (counted as lost where rmw_zenoh numbers it); and with "
+        "several ingest workers, also per worker, where beyond it samples are dropped and counted. Each "
+        "holds its payload while it waits (about 5 kB at 50 components): the memory it may take is this "
+        "many times the largest sample",
         metavar="N",
     ),
     option(
