@@ -11,6 +11,11 @@ the window. Beside the fleet, one more robot
 (`bench.change_probe`) changes a value every second: the time each change takes to reach the exporter's
 model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
 the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
+The first look (every robot's first array read whole, with one event a component) holds up what arrives
+meanwhile: how long it took is printed, and the p99 is given over the whole window and after it (the
+target's). With `--floor` a subscriber that only counts (`bench.zenoh_counter`, subscribed to the
+tokens as the exporter is) hears the same fleet through the same router: what it missed, the router
+never delivered to anyone.
 Lost updates = messages the generator published minus messages the exporter counted as received (the
 probe's taken out); CPU is the exporter's processes' (main and workers) over the window; the
 generator's own CPU per 1,000 robots is printed beside every figure. `--transport dds` publishes raw
@@ -49,6 +54,7 @@ from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident
 from bench.loadgen import add_shape_arguments, running_loadgen, shape_arguments, shape_of
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
+from bench.zenoh_counter import CounterProcess, running_counter
 from testbed.ports import fresh_domain_id
 from testbed.processes import RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
@@ -135,6 +141,16 @@ def wiring(transport: str, directory: Path) -> Iterator[Wiring]:
     with running_router_process(directory) as (port, router):
         loadgen_args = (f"--zenoh.connect={endpoint(port)}", "--zenoh.listen=tcp/127.0.0.1:0")
         yield Wiring(exporter_args(port), loadgen_args, None, router, endpoint(port))
+
+
+@contextlib.contextmanager
+def floor_counter(wires: Wiring, directory: Path, wanted: bool) -> Iterator[CounterProcess | None]:
+    """The counting subscriber beside the exporter, when `wanted` and the fleet is on Zenoh."""
+    if not wanted or wires.zenoh_endpoint is None:
+        yield None
+        return
+    with running_counter(wires.zenoh_endpoint, directory, "0/**", tokens=True) as counter:
+        yield counter
 
 
 def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
@@ -268,8 +284,14 @@ def run(
     rules: bool = False,
     transport: str = ZENOH,
     rate: float = 1.0,
+    floor: bool = False,
 ) -> list[Row]:
-    """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers."""
+    """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
+
+    `floor`: a subscriber that only counts (`bench.zenoh_counter`, the exporter's token subscription
+    too) hears the same fleet through the same router in the same run: the samples the router itself
+    does not deliver.
+    """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
     label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}"
@@ -290,6 +312,7 @@ def run(
             "--log.level=warning",
             *exporter_options,
         ) as exporter,
+        floor_counter(wires, Path(tmp), floor) as counter,
     ):
         pid = exporter.process.pid
         started_cpu, router_cpu, started = tree_cpu_seconds(pid), wires.router_cpu(), 0.0
@@ -325,7 +348,9 @@ def run(
         cpu = tree_cpu_seconds(pid) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
         counts = counted(exporter.url, transport)
-        got = counts.received - (probe.published if probe else 0)
+        probed = probe.published if probe else 0
+        got = counts.received - probed
+        floor_got = counter.samples() - probed if counter else None
         rss = tree_resident_bytes(pid)
         scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
     lost = max(0.0, figures.published - got)
@@ -334,6 +359,26 @@ def run(
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
+        *(
+            [
+                Row(
+                    "scale",
+                    f"{label}: lost by a subscriber that only counts (same router, same run)",
+                    max(0.0, figures.published - floor_got),
+                    "messages",
+                ),
+                Row(
+                    "scale",
+                    f"{label}: lost beyond it",
+                    max(0.0, floor_got - got),
+                    "messages",
+                    "0",
+                    got >= floor_got,
+                ),
+            ]
+            if floor_got is not None
+            else []
+        ),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
         Row("scale", f"{label}: exporter memory a component", rss / (robots * shape.components), "bytes"),
@@ -377,6 +422,11 @@ def main() -> None:
     parser.add_argument(
         "--rules", action="store_true", help="then the shipped rules too (with --prometheus-seconds)"
     )
+    parser.add_argument(
+        "--floor",
+        action="store_true",
+        help="a subscriber that only counts hears the fleet beside the exporter (Zenoh): the router's losses",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args()
     rows: list[Row] = []
@@ -392,6 +442,7 @@ def main() -> None:
                 options.rules,
                 options.transport,
                 options.rate,
+                options.floor,
             )
     emit(rows)
 
