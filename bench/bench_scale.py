@@ -329,7 +329,12 @@ def run(
             started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
             prometheus_rows: list[Row] = []
             with wires.probe(exporter.url, shape.components) as probe:
-                time.sleep(max(0.0, seconds - CHECK_SECONDS))
+                # Steady: from the window's middle (the first look long over) to the check's runs.
+                time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
+                steady_from, steady_cpu = time.monotonic(), tree_cpu_seconds(pid)
+                steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
+                time.sleep(max(0.0, steady_until - time.monotonic()))
+                steady_cpu = (tree_cpu_seconds(pid) - steady_cpu) / (time.monotonic() - steady_from)
                 checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
                 if prometheus_seconds:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
@@ -381,6 +386,12 @@ def run(
         ),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
+        Row(
+            "scale",
+            f"{label}: exporter CPU a message, steady (the window's second half)",
+            steady_cpu / (robots * rate) * 1e6,
+            "µs",
+        ),
         Row("scale", f"{label}: exporter memory a component", rss / (robots * shape.components), "bytes"),
         *(
             [Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core")]

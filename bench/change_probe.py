@@ -26,6 +26,7 @@ from overseer.simulator.design import aggregated_statuses, initial_levels, leaf_
 
 PROBE_ROBOT = "probe"
 TARGET_SECONDS = 1.0  # a change's time to /metrics, p99
+SETTLED = 10  # changes in a row within the target: the first look is over
 SENT_KEY = "sent"
 SENT_WIDTH = 17  # a wall time as 0000000000.000000
 _STAMP = struct.Struct("<iI")
@@ -97,14 +98,16 @@ class ChangeProbe:
         self._wire.shut()
 
     def first_look_seconds(self) -> float:
-        """From the probe's start to the first change that reached the model within `TARGET_SECONDS`.
+        """From the probe's start to the first of `SETTLED` changes in a row within `TARGET_SECONDS`.
 
         While the exporter first hears a fleet (every robot's first array read whole, one event a
-        component), what arrives waits behind it: this is how long a change waited for it to end.
+        component), what arrives waits behind it, and the backlog peaks seconds after the fleet's first
+        publications: its end is when changes keep arriving in time.
         """
-        for sent, latency in zip(self.sent_at, self.latencies, strict=True):
-            if latency <= TARGET_SECONDS:
-                return sent - self.started_at
+        in_time = [latency <= TARGET_SECONDS for latency in self.latencies]
+        for index in range(len(in_time) - SETTLED + 1):
+            if all(in_time[index : index + SETTLED]):
+                return self.sent_at[index] - self.started_at
         return float("nan")
 
     def rows(self, label: str) -> list[Row]:
@@ -121,7 +124,7 @@ class ChangeProbe:
             Row("scale", f"{label}: a change to /metrics, median", statistics.median(ordered), "s"),
             Row("scale", f"{label}: a change to /metrics, p99 (the whole window)", p99, "s"),
             Row("scale", f"{label}: a change to /metrics, worst", ordered[-1], "s"),
-            Row("scale", f"{label}: the first look (until a change took under 1 s)", first_look, "s"),
+            Row("scale", f"{label}: the first look (until changes take under 1 s)", first_look, "s"),
             Row(
                 "scale",
                 f"{label}: a change to /metrics after the first look, p99 (of {len(steady)})",
