@@ -22,6 +22,7 @@ from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.simulator.zenoh_publisher import attachment
 from overseer.sources.topic_names import AGGREGATED, RAW
+from overseer.sources.zenoh import relay as relay_module
 from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
 from overseer.sources.zenoh.relay import ZenohRelay
 from overseer.sources.zenoh.relayed import RelayedZenohSource
@@ -168,3 +169,17 @@ def test_samples_beyond_what_may_wait_for_a_worker_are_dropped_and_counted_not_l
     assert dropped >= sent - 3 * QUEUE_LENGTH  # what waited, what the pipe held and one batch at most
     assert received == sent + 1 - dropped
     assert lost == 0  # the dropped were counted as such, not as lost as well
+
+
+def test_a_flood_of_tokens_to_a_worker_that_is_stuck_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(relay_module, "MAX_LIVE_TOKENS", 10)
+    relay = ZenohRelay(ZenohConfig(enabled=True, queue_length=5), Shard(), 1)
+    _, writer = multiprocessing.Pipe(duplex=False)  # nothing ever reads it: a worker that is stuck
+    relay.attach(0, writer)
+    for entity in range(1000):  # tokens come and go faster than anyone could follow
+        relay.on_token(updater_token(f"robot{entity}", entity), alive=entity % 2 == 0)
+    outbox = relay._outboxes[0]
+    assert outbox is not None
+    assert len(outbox._items) <= 5 + 10  # what may wait, beside one batch in the pipe
+    assert outbox._tokens_dropped > 900
+    relay.stop()

@@ -158,6 +158,7 @@ class _Outbox:
         self._items: list[Item] = []
         self._samples = 0  # of `_items`
         self._dropped = 0
+        self._tokens_dropped = 0
         self._heard: dict[bytes, int] = {}  # the highest number dropped of each publisher
         self._ready = threading.Condition()
         self._closed = False
@@ -168,6 +169,11 @@ class _Outbox:
         is_sample = item[0] == SAMPLE
         with self._ready:
             if self._closed:
+                return
+            if not is_sample and len(self._items) >= self._limit + MAX_LIVE_TOKENS:
+                if not self._tokens_dropped:  # a flood of tokens to a worker that is stuck
+                    log.warning("an ingest worker is too far behind: Zenoh tokens dropped from its queue")
+                self._tokens_dropped += 1
                 return
             if is_sample and self._samples >= self._limit:
                 self._dropped += 1
