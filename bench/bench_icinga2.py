@@ -12,9 +12,12 @@ check plugins they forked and reaped (cutime + cstime), as a share of one core; 
 counted per minute (its CIB status), and the exporter's CPU in this process (HTTP API for the checks, or
 the push). `--robots 100,1000` adds ten times the paper's fleet; on a small machine the active case at
 1,000 robots saturates it (it then runs only part of the checks: see results per minute, and the CPU
-per result), so that one is not part of `make bench`.
+per result), so that one is not part of `make bench`. `--push-only` leaves the active checks out (they
+cannot run at 10,000 robots here), and `--package` lets the exporter's ApiUser deploy config packages, so
+that a fleet first heard is registered in one stage rather than one object a call.
 
     python -m bench.bench_icinga2 [--robots 100[,1000]] [--interval 60] [--seconds 120] [--warmup 20]
+        [--push-only] [--package]
 """
 
 from __future__ import annotations
@@ -30,7 +33,15 @@ from bench.common import Row, emit
 from overseer.app import Exporter
 from overseer.config import load_config
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from testbed.icinga2 import Icinga2, push_api_user, push_config, running_icinga2
+from testbed.icinga2 import (
+    PUSH_BULK_USER,
+    PUSH_USER,
+    Icinga2,
+    push_api_user,
+    push_bulk_api_user,
+    push_config,
+    running_icinga2,
+)
 from testbed.ports import free_port
 from testbed.processes import wait_for
 
@@ -157,8 +168,10 @@ def poll_phase(robots: int, options: argparse.Namespace, tmp: Path) -> dict[str,
 
 def push_phase(robots: int, options: argparse.Namespace, tmp: Path) -> dict[str, float]:
     """A fresh Icinga 2 receiving every robot's results pushed by the exporter every interval."""
-    with running_icinga2(tmp / f"push{robots}", push_api_user()) as daemon:
-        config = push_config(tmp, daemon, f"bench{robots}", f"{options.interval}s")
+    users = push_api_user() + push_bulk_api_user()
+    with running_icinga2(tmp / f"push{robots}", users) as daemon:
+        username = PUSH_BULK_USER if options.package else PUSH_USER
+        config = push_config(tmp, daemon, f"bench{robots}", f"{options.interval}s", username=username)
         running = exporter({}, config, robots)
         registering = time.monotonic()
         running.start()
@@ -170,7 +183,7 @@ def push_phase(robots: int, options: argparse.Namespace, tmp: Path) -> dict[str,
                 _, _, pending = push.stats.read()
                 return pending == 0 and push.stats.read()[0]["ok"] >= robots * (SERVICES_PER_ROBOT + 1)
 
-            wait_for(registered, timeout=1800, interval=0.5, message="every robot registered")
+            wait_for(registered, timeout=7200, interval=0.5, message="every robot registered")
             took = time.monotonic() - registering
             time.sleep(options.warmup)
             figures = measure(daemon, options.seconds)
@@ -183,11 +196,26 @@ def push_phase(robots: int, options: argparse.Namespace, tmp: Path) -> dict[str,
 
 
 def rows_for(robots: int, options: argparse.Namespace, tmp: Path) -> list[Row]:
-    """Both phases for one fleet size, and their ratios."""
-    poll = poll_phase(robots, options, tmp)
+    """Both phases for one fleet size, and their ratios (the push's rows alone with --push-only)."""
     push = push_phase(robots, options, tmp)
     name = f"icinga2, {robots} robots x {SERVICES_PER_ROBOT} services, every {options.interval:g}s"
+    name += ", config package" if options.package else ", one object a call"
     share: Callable[[float], float] = lambda value: round(100 * value, 2)  # noqa: E731
+    push_rows = [
+        Row(name, "push: icinga2 CPU", share(push["icinga2+checks"]), "% core"),
+        Row(name, "push: exporter CPU (push loop)", share(push["exporter"]), "% core"),
+        Row(name, "push: service results per minute", push["checks/min"], "/min"),
+        Row(
+            name,
+            "push: time to register every robot and push its first results",
+            round(push["register"], 1),
+            "s",
+        ),
+        Row(name, "push: icinga2 CPU per result", per_result(push), "ms"),
+    ]
+    if options.push_only:
+        return push_rows
+    poll = poll_phase(robots, options, tmp)
     return [
         Row(name, "active checks: icinga2 CPU, own", share(poll["icinga2"]), "% core"),
         Row(
@@ -244,6 +272,10 @@ def main() -> None:
     )
     parser.add_argument("--seconds", type=float, default=120.0, help="measurement window, s (default 120)")
     parser.add_argument("--warmup", type=float, default=20.0, help="wait before measuring, s (default 20)")
+    parser.add_argument("--push-only", action="store_true", help="measure the push alone, not active checks")
+    parser.add_argument(
+        "--package", action="store_true", help="the exporter's ApiUser may deploy config packages"
+    )
     options = parser.parse_args()
     rows: list[Row] = []
     with tempfile.TemporaryDirectory(prefix="bench-icinga2-") as tmp:

@@ -258,6 +258,16 @@ def push_cert_api_user() -> str:
 
 
 PUSH_CERT_USER = "overseer-push-cert"
+PUSH_BULK_USER = "overseer-bulk"
+
+
+def push_bulk_api_user() -> str:
+    """The push ApiUser example as user `PUSH_BULK_USER`, its optional config package permissions on."""
+    text = push_api_user().replace(f'"{PUSH_USER}"', f'"{PUSH_BULK_USER}"', 1)
+    for permission in ('"config/query"', '"config/modify"'):
+        assert f"// {permission}," in text, "the example's optional package permissions changed"
+        text = text.replace(f"// {permission},", f"{permission},")
+    return text
 
 
 def client_certificate(root: Path, cn: str) -> tuple[Path, Path]:
@@ -282,6 +292,7 @@ def push_config(
     password: str = PUSH_PASSWORD,
     client_cert: tuple[Path, Path] | None = None,
     timeout: str = "10s",
+    username: str = PUSH_USER,
 ) -> Path:
     """An exporter configuration file pushing to `daemon` as the example ApiUser (password in a file).
 
@@ -298,7 +309,7 @@ def push_config(
     if client_cert is None:
         password_file = directory / f"{exporter_id}.password"
         password_file.write_text(password + "\n", encoding="utf-8")
-        section.update(username=PUSH_USER, password_file=str(password_file))
+        section.update(username=username, password_file=str(password_file))
     else:
         section.update(client_cert=str(client_cert[0]), client_key=str(client_cert[1]))
     config = directory / f"{exporter_id}.yml"

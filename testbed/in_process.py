@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import urllib.error
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -17,8 +17,13 @@ from testbed.ports import free_port
 
 
 @contextmanager
-def in_process_exporter(tmp_path: Path, **sections: Any) -> Iterator[Exporter]:
-    """An exporter with no transport, serving on loopback, its database in `tmp_path`; `sections` add."""
+def in_process_exporter(
+    tmp_path: Path, before_start: Callable[[Exporter], None] | None = None, **sections: Any
+) -> Iterator[Exporter]:
+    """An exporter with no transport, serving on loopback, its database in `tmp_path`; `sections` add.
+
+    `before_start` may fill its model before anything (the Icinga 2 push) first looks at it.
+    """
     raw: dict[str, Any] = {
         "dds": {"enabled": False},
         "web": {"listen_address": f"127.0.0.1:{free_port()}"},
@@ -28,6 +33,8 @@ def in_process_exporter(tmp_path: Path, **sections: Any) -> Iterator[Exporter]:
     for name, section in sections.items():
         raw[name] = {**raw.get(name, {}), **section} if isinstance(section, dict) else section
     running = Exporter(config_from_dict(raw))
+    if before_start is not None:
+        before_start(running)
     running.start()
     try:
         yield running

@@ -75,6 +75,20 @@ class Icinga2Client:
         headers = self._headers
         if method == "GET" and data is not None:
             method, headers = "POST", {**headers, "X-HTTP-Method-Override": "GET"}
+        status, payload = self._exchange(method, path, data, headers)
+        try:
+            document = json.loads(payload) if payload else None
+        except ValueError:
+            document = None
+        return status, document
+
+    def fetch(self, path: str) -> tuple[int, bytes]:
+        """GET a file as it is (a config stage's `status` or `startup.log`): (status, bytes)."""
+        return self._exchange("GET", path, None, {**self._headers, "Accept": "application/octet-stream"})
+
+    def _exchange(
+        self, method: str, path: str, data: bytes | None, headers: dict[str, str]
+    ) -> tuple[int, bytes]:
         for attempt in (1, 2):  # a kept-alive connection the server closed fails once; retry on a new one
             connection = self._connect()
             try:
@@ -97,11 +111,7 @@ class Icinga2Client:
                 raise Icinga2Error("connection", f"cannot reach {self._config.url}: {text}") from None
             if response.getheader("Connection", "").lower() == "close":
                 self.close()
-            try:
-                document = json.loads(payload) if payload else None
-            except ValueError:
-                document = None
-            return response.status, document
+            return response.status, payload
         raise AssertionError("unreachable")
 
     def expect(self, method: str, path: str, body: dict[str, Any] | None = None) -> Any:

@@ -55,6 +55,11 @@ class HostLabels:
         self._set[host] = labels
         return {**dict(labels), LABELS_VARIABLE: [name for name, _ in labels]} if labels else {}
 
+    def current(self, host: str) -> dict[str, Any]:
+        """The label variables `host` has in Icinga now, as `variables` gives them (an empty dict without)."""
+        labels = self._set.get(host, ())
+        return {**dict(labels), LABELS_VARIABLE: [name for name, _ in labels]} if labels else {}
+
     def forget(self, host: str) -> None:
         """A host deleted: nothing to keep of it."""
         for kept in (self._wanted, self._set):

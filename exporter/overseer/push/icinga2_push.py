@@ -5,7 +5,9 @@ changed has its results queued as urgent at once; every robot's results are queu
 `interval`. Pending results are kept as the latest one per host and service, never as a queue of
 every intermediate one, so after an outage Icinga gets the state now. Objects are created on first
 need and marked with `vars.overseer_exporter`; only objects with this exporter's mark are ever
-changed or deleted.
+changed or deleted. Many robots new at once (a fleet first heard) are registered in one stage of the
+exporter's config package (`icinga2_package`) where the ApiUser may, as one object a call would take
+Icinga 2 hours at 10,000 robots.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from overseer.push.icinga2_downtimes import Icinga2Downtimes
 from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
+from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
 from overseer.push.icinga2_results import CheckResult, awaiting, robot_groups, robot_results, robot_signature
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
@@ -38,6 +41,9 @@ SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: th
 HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 # Active checks only run once a pushed result's TTL ran out; then `dummy` says the exporter is silent.
 FALLBACK_CHECK_INTERVAL = 86400.0
+BULK_OBJECTS = 100  # objects to register at once from which a config package stage beats one call each
+DEPLOY_SECONDS = 600.0  # how long a stage may take to validate and load (a minute or two at 100,000 objects)
+PACKAGE_PAUSE_SECONDS = 600.0  # after Icinga rejected a stage, one call an object for this long
 
 
 class Icinga2Push:
@@ -81,6 +87,9 @@ class Icinga2Push:
         self._to_delete: set[str] = set()
         self._labels = HostLabels(self._client)
         self._retry = Retry("Icinga 2 push", log)
+        self._package: ConfigPackage | None = ConfigPackage(self._client, config.exporter_id, DEPLOY_SECONDS)
+        self._package_paused_until = 0.0
+        self._packaged: dict[str, set[str]] = {}  # hosts of the package → their services in it
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -172,6 +181,7 @@ class Icinga2Push:
             if self._created is None:
                 self._created = self._find_own_objects(now)
             self._delete_forgotten(now)
+            self._register_in_bulk(now)
             if self._downtimes is not None and self._downtimes.due(self._created):
                 # Before the results (and, after a restart, right after finding our hosts): a host in a
                 # window is in downtime when its robot's DOWN arrives, or its TTL runs out.
@@ -207,19 +217,25 @@ class Icinga2Push:
         own permission filter already limits the answer to marked objects, and the mark is checked here.
         """
         mark = self._config.exporter_id
-        hosts = self._client.expect("GET", "/v1/objects/hosts", {"attrs": ["name", "vars"]})
+        package = None if self._package is None else self._package.name
+        hosts = self._client.expect("GET", "/v1/objects/hosts", {"attrs": ["name", "vars", "package"]})
         created: dict[str, set[str]] = {
             item["name"]: set() for item in hosts["results"] if _exporter_of(item) == mark
         }
         for item in hosts["results"]:
             if item["name"] in created:
                 self._labels.found(item["name"], item.get("attrs", {}).get("vars") or {})
+                if item.get("attrs", {}).get("package") == package:
+                    self._packaged[item["name"]] = set()
         services = self._client.expect(
-            "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars"]}
+            "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars", "package"]}
         )
         for item in services["results"]:
-            if _exporter_of(item) == mark and item["attrs"]["host_name"] in created:
-                created[item["attrs"]["host_name"]].add(item["attrs"]["name"])
+            host = item["attrs"]["host_name"]
+            if _exporter_of(item) == mark and host in created:
+                created[host].add(item["attrs"]["name"])
+                if host in self._packaged and item["attrs"].get("package") == package:
+                    self._packaged[host].add(item["attrs"]["name"])
         known = set(self._robot_hosts.values())
         for host in created:
             if host not in known:
@@ -233,6 +249,7 @@ class Icinga2Push:
             if now >= when:
                 self._to_delete.add(host)
                 del self._orphans[host]
+        self._unpackage([host for host in self._to_delete if host in self._packaged])
         for host in list(self._to_delete):
             if host in self._created:
                 status, _ = self._client.request("DELETE", object_path("hosts", host) + "?cascade=1")
@@ -241,13 +258,119 @@ class Icinga2Push:
                 del self._created[host]
             self._to_delete.discard(host)
 
+    def _unpackage(self, hosts: list[str]) -> None:
+        """Delete hosts of the package: the services added by a call each first, then a stage without them."""
+        if not hosts:
+            return
+        assert self._created is not None
+        for host in hosts:
+            for service in self._created.get(host, set()) - self._packaged[host]:
+                status, _ = self._client.request("DELETE", object_path("services", host, service))
+                if status not in (200, 404):
+                    raise Icinga2Error(
+                        f"http_{status}", f"deleting service {host}!{service}: HTTP {status}", status
+                    )
+        kept = {host: services for host, services in self._packaged.items() if host not in hosts}
+        try:
+            self._deploy(kept, lambda: not self._exists(hosts[0]))
+        except (PackageRefused, PackageRejected) as error:
+            log.warning(
+                "Icinga 2 refused a stage of package %s without the %d forgotten robots' hosts (%s): they "
+                "stay in Icinga 2 until a stage is accepted",
+                self._package_name(),
+                len(hosts),
+                error,
+            )
+        for host in hosts:
+            del self._packaged[host]
+            self._created.pop(host, None)
+            self._to_delete.discard(host)
+
+    def _register_in_bulk(self, now: float) -> None:
+        """Register the hosts and services the queued results need in one stage, when they are many."""
+        if self._package is None or now < self._package_paused_until:
+            return
+        assert self._created is not None
+        wanted: dict[str, set[str]] = {}
+        for queue in (self._urgent, self._pending):
+            for host, service in queue:
+                if host not in self._created and host not in self._foreign:
+                    services = wanted.setdefault(host, set())
+                    if service:
+                        services.add(service)
+        services_wanted = sum(len(services) for services in wanted.values())
+        if len(wanted) + services_wanted < BULK_OBJECTS:
+            return
+        first = next(iter(wanted))
+        try:
+            self._deploy({**self._packaged, **wanted}, lambda: self._exists(first))
+        except PackageRefused as error:
+            log.info(
+                "Icinga 2 registers robots one object a call: the ApiUser may not deploy config packages "
+                "(%s); with config/query and config/modify a fleet's robots are registered at once",
+                error,
+            )
+            self._package = None
+            return
+        except PackageRejected as error:
+            log.warning(
+                "Icinga 2 rejected a stage of package %s registering %d robots (%s): registering them one "
+                "object a call for %gs",
+                self._package.name,
+                len(wanted),
+                error,
+                PACKAGE_PAUSE_SECONDS,
+            )
+            self._package_paused_until = now + PACKAGE_PAUSE_SECONDS
+            return
+        for host, services in wanted.items():
+            self._packaged[host] = services
+            self._created[host] = set(services)
+            if self._downtimes is not None:
+                self._downtimes.cover(host, self._created[host])
+        log.info(
+            "Icinga 2: %d hosts and %d services registered in one stage of package %s",
+            len(wanted),
+            services_wanted,
+            self._package.name,
+        )
+
+    def _deploy(self, hosts: dict[str, set[str]], loaded: Callable[[], bool]) -> None:
+        """Make `hosts` and their services the package's content; raises what `ConfigPackage.deploy` does."""
+        if self._package is None:
+            raise PackageRefused("config packages are not used")
+        texts = []
+        for host in sorted(hosts):
+            variables = (
+                self._labels.variables(host) if host not in self._packaged else self._labels.current(host)
+            )
+            texts.append(
+                object_text("Host", host, self._host_attrs(host, variables), self._config.host_template)
+            )
+            for service in sorted(hosts[host]):
+                attrs = self._service_attrs()
+                texts.append(object_text("Service", service, attrs, self._config.service_template, host))
+        self._package.deploy("".join(texts), loaded)
+
+    def _package_name(self) -> str:
+        return "(none)" if self._package is None else self._package.name
+
+    def _exists(self, host: str) -> bool:
+        status, document = self._client.request("GET", object_path("hosts", host), {"attrs": ["name"]})
+        if status not in (200, 404):
+            raise Icinga2Error(
+                f"http_{status}", f"reading host {host}: HTTP {status}: {error_text(document)}", status
+            )
+        return status == 200
+
     def _push(self, result: CheckResult) -> bool:
         """Deliver one result, creating its host or service first; False when it was dropped."""
         assert self._created is not None
         if result.host in self._foreign:
             return False
         made = result.host not in self._created
-        if made and not self._create("hosts", result.host, "", self._host_attrs(result.host)):
+        attrs = self._host_attrs(result.host, self._labels.variables(result.host)) if made else {}
+        if made and not self._create("hosts", result.host, "", attrs):
             return False
         if result.service and result.service not in self._created[result.host]:
             made = self._create("services", result.host, result.service, self._service_attrs()) or made
@@ -272,6 +395,7 @@ class Icinga2Push:
                 self._created[result.host].discard(result.service)
             else:
                 self._created.pop(result.host, None)
+                self._packaged.pop(result.host, None)  # the package is gone too, or a stage would clash
             return False
         if not 200 <= status < 300:
             raise Icinga2Error(
@@ -326,10 +450,8 @@ class Icinga2Push:
     def _marks(self) -> dict[str, Any]:
         return {"overseer_managed": True, "overseer_exporter": self._config.exporter_id, "dummy_state": 3}
 
-    def _host_attrs(self, host: str) -> dict[str, Any]:
-        return self._passive_attrs(
-            {**self._labels.variables(host), "ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT}
-        )
+    def _host_attrs(self, host: str, labels: dict[str, Any]) -> dict[str, Any]:
+        return self._passive_attrs({**labels, "ros_robot": robot_name(host), "dummy_text": HOST_SILENT_TEXT})
 
     def _service_attrs(self) -> dict[str, Any]:
         return self._passive_attrs({"dummy_text": SILENT_TEXT})

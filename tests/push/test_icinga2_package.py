@@ -1,0 +1,190 @@
+"""A fleet first heard is registered in a real Icinga 2 in one stage of the exporter's config package.
+
+Its own Icinga 2 daemon (a stage reloads it, which the other push tests' daemon should not see), with
+two users: the shipped push ApiUser example as it is, and the same with its optional config package
+permissions switched on. Each test runs exporters in the test process, their models filled before the
+push first looks, with robots of their own.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from overseer.app import Exporter
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.push.icinga2_names import host_name
+from overseer.push.icinga2_package import dsl_string, object_text, package_name
+from overseer.push.icinga2_push import BULK_OBJECTS
+from testbed.icinga2 import (
+    PUSH_BULK_USER,
+    PUSH_USER,
+    Icinga2,
+    push_api_user,
+    push_bulk_api_user,
+    push_config,
+    running_icinga2,
+)
+from testbed.in_process import in_process_exporter
+from testbed.processes import wait_for
+
+pytestmark = pytest.mark.servers
+
+ROBOTS = 30  # a host, its robot service and two group services each: 120 objects at once
+HOSTILE = 'robot "7" \\ é\tbad'  # quotes, a backslash, UTF-8 and a control character in vars.ros_robot
+
+
+@pytest.fixture(scope="module")
+def icinga(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Icinga2]:
+    """Icinga 2 with the push ApiUser example, as it is and with config packages allowed."""
+    with running_icinga2(
+        tmp_path_factory.mktemp("icinga2"), push_api_user() + push_bulk_api_user()
+    ) as daemon:
+        yield daemon
+
+
+def robot_array(level: int, groups: tuple[str, ...] = ("Power", "Motor")) -> DiagnosticArray:
+    """An aggregator's array with one component in each of `groups`, the first at `level`."""
+    return DiagnosticArray(
+        0,
+        0,
+        "",
+        tuple(
+            DiagnosticStatus(level if index == 0 else 0, f"/{group}/Part", "state", "hw", (("k", "v"),))
+            for index, group in enumerate(groups)
+        ),
+    )
+
+
+@contextmanager
+def exporter(
+    tmp_path: Path, daemon: Icinga2, exporter_id: str, user: str, robots: list[str], robot_timeout: str = "1h"
+) -> Iterator[Exporter]:
+    """An in-process exporter pushing `robots` (in its model before the push starts) to `daemon` as `user`."""
+    config = push_config(tmp_path, daemon, exporter_id, "1h", timeout="5s", username=user)
+    section = json.loads(config.read_text())["icinga2"]
+
+    def fill(running: Exporter) -> None:
+        assert running.model is not None
+        for index, robot in enumerate(robots):
+            running.model.apply(robot, robot_array(2 if index % 3 == 0 else 0), "dds")
+
+    with in_process_exporter(
+        tmp_path,
+        before_start=fill,
+        icinga2=section,
+        fleet={"stale_after": "1s", "robot_timeout": robot_timeout},
+    ) as running:
+        yield running
+
+
+def hosts(daemon: Icinga2, prefix: str) -> dict[str, dict[str, Any]]:
+    """The hosts whose names start with `prefix`: their package, vars and last result."""
+    answer = daemon.api(
+        "GET", "/v1/objects/hosts", {"attrs": ["name", "package", "vars", "last_check_result"]}
+    )
+    return {item["name"]: item["attrs"] for item in answer["results"] if item["name"].startswith(prefix)}
+
+
+def services(daemon: Icinga2, host: str) -> dict[str, dict[str, Any]]:
+    """The services of `host` by short name: their package and last result."""
+    answer = daemon.api(
+        "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "package", "last_check_result"]}
+    )
+    return {
+        item["attrs"]["name"]: item["attrs"]
+        for item in answer["results"]
+        if item["attrs"]["host_name"] == host
+    }
+
+
+def all_pushed(daemon: Icinga2, prefix: str, count: int, per_host: int) -> bool:
+    """Whether `count` hosts of `prefix` and `per_host` services each exist, every one with a result."""
+    found = hosts(daemon, prefix)
+    if len(found) != count or any(host["last_check_result"] is None for host in found.values()):
+        return False
+    for host in found:
+        made = services(daemon, host)
+        if len(made) != per_host or any(service["last_check_result"] is None for service in made.values()):
+            return False
+    return True
+
+
+def stages(daemon: Icinga2, exporter_id: str) -> list[str]:
+    """The stages Icinga keeps of the exporter's package."""
+    for package in daemon.api("GET", "/v1/config/packages", {})["results"]:
+        if package["name"] == package_name(exporter_id):
+            return list(package["stages"])
+    return []
+
+
+def test_dsl_strings_escape_what_icinga_reads_specially() -> None:
+    assert dsl_string('a"b\\c\nd\te$f\x01') == '"a\\"b\\\\c\\nd\\te$$f\\001"'
+    text = object_text("Service", "svc", {"check_command": "dummy", "vars.x": [1, True, None]}, "tmpl", "h")
+    assert text == (
+        'object Service "svc" {\n  import "tmpl"\n  host_name = "h"\n  check_command = "dummy"\n'
+        '  vars["x"] = [1, true, null]\n}\n'
+    )
+
+
+def test_a_fleet_first_heard_is_registered_in_one_stage(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"pkg/robot{index}" for index in range(ROBOTS - 1)] + [f"pkg/{HOSTILE}"]
+    assert ROBOTS * 4 >= BULK_OBJECTS
+    with exporter(tmp_path, icinga, "bulk", PUSH_BULK_USER, robots):
+        wait_for(lambda: all_pushed(icinga, "pkg.", ROBOTS, 3), timeout=90, message="every robot pushed")
+        assert "registered in one stage of package overseer-bulk" in caplog.text
+    found = hosts(icinga, "pkg.")
+    assert {host["package"] for host in found.values()} == {"overseer-bulk"}
+    assert found[host_name(f"pkg/{HOSTILE}")]["vars"]["ros_robot"] == f"pkg/{HOSTILE}"
+    assert {service["package"] for service in services(icinga, "pkg.robot0").values()} == {"overseer-bulk"}
+    assert found["pkg.robot0"]["last_check_result"]["output"].startswith("UP - pkg/robot0")
+    assert len(stages(icinga, "bulk")) == 1
+
+
+def test_a_restarted_exporter_keeps_its_stage_and_deletes_a_forgotten_robot_with_the_next(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"again/robot{index}" for index in range(ROBOTS)]
+    with exporter(tmp_path, icinga, "again", PUSH_BULK_USER, robots):
+        wait_for(lambda: all_pushed(icinga, "again.", ROBOTS, 3), timeout=90, message="every robot pushed")
+    first = stages(icinga, "again")
+    with exporter(tmp_path, icinga, "again", PUSH_BULK_USER, robots, robot_timeout="2s") as running:
+        assert running.model is not None
+        wait_for(lambda: "found 30 hosts of this exporter (again)" in caplog.text, timeout=30)
+        # A group robot1 did not have: its service is made by a call of its own, outside the package.
+        running.model.apply("again/robot1", robot_array(0, ("Power", "Motor", "Camera")), "dds")
+        wait_for(
+            lambda: (
+                services(icinga, "again.robot1").get("ros-diagnostics-Camera", {}).get("package") == "_api"
+            ),
+            timeout=30,
+            message="the new group's service",
+        )
+        wait_for(lambda: running.model.retire("again/robot1") == "retired", timeout=30, message="robot1 down")
+        wait_for(lambda: "again.robot1" not in hosts(icinga, "again."), timeout=90, message="robot1 deleted")
+        assert len(hosts(icinga, "again.")) == ROBOTS - 1
+        assert not services(icinga, "again.robot1")
+    assert stages(icinga, "again") != first and len(stages(icinga, "again")) == 1  # the old one removed
+    assert "refused a stage" not in caplog.text and "rejected a stage" not in caplog.text
+
+
+def test_without_the_package_permissions_robots_are_registered_one_object_a_call(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"narrow/robot{index}" for index in range(ROBOTS)]
+    with exporter(tmp_path, icinga, "narrow", PUSH_USER, robots):
+        wait_for(lambda: all_pushed(icinga, "narrow.", ROBOTS, 3), timeout=120, message="every robot pushed")
+        assert "the ApiUser may not deploy config packages" in caplog.text
+    assert {host["package"] for host in hosts(icinga, "narrow.").values()} == {"_api"}
+    assert not stages(icinga, "narrow")
