@@ -31,7 +31,7 @@ from testbed.icinga2 import (
     push_config,
     running_icinga2,
 )
-from testbed.in_process import in_process_exporter
+from testbed.in_process import call, in_process_exporter
 from testbed.processes import wait_for
 
 pytestmark = pytest.mark.servers
@@ -116,6 +116,14 @@ def all_pushed(daemon: Icinga2, prefix: str, count: int, per_host: int) -> bool:
     return True
 
 
+def stages_counted(running: Exporter, result: str) -> float:
+    """overseer_icinga2_package_stages_total of one result on the exporter's /metrics (0 when absent)."""
+    _, body = call(running, "/metrics")
+    prefix = f'overseer_icinga2_package_stages_total{{result="{result}"}} '
+    lines = [line for line in body.decode().splitlines() if line.startswith(prefix)]
+    return float(lines[0].removeprefix(prefix)) if lines else 0.0
+
+
 def stages(daemon: Icinga2, exporter_id: str) -> list[str]:
     """The stages Icinga keeps of the exporter's package."""
     for package in daemon.api("GET", "/v1/config/packages", {})["results"]:
@@ -139,9 +147,10 @@ def test_a_fleet_first_heard_is_registered_in_one_stage(
     caplog.set_level(logging.INFO, logger="overseer.push")
     robots = [f"pkg/robot{index}" for index in range(ROBOTS - 1)] + [f"pkg/{HOSTILE}"]
     assert ROBOTS * 4 >= BULK_OBJECTS
-    with exporter(tmp_path, icinga, "bulk", PUSH_BULK_USER, robots):
+    with exporter(tmp_path, icinga, "bulk", PUSH_BULK_USER, robots) as running:
         wait_for(lambda: all_pushed(icinga, "pkg.", ROBOTS, 3), timeout=90, message="every robot pushed")
         assert "registered in one stage of package overseer-bulk" in caplog.text
+        assert (stages_counted(running, "ok"), stages_counted(running, "refused")) == (1, 0)
     found = hosts(icinga, "pkg.")
     assert {host["package"] for host in found.values()} == {"overseer-bulk"}
     assert found[host_name(f"pkg/{HOSTILE}")]["vars"]["ros_robot"] == f"pkg/{HOSTILE}"
@@ -174,6 +183,7 @@ def test_a_restarted_exporter_keeps_its_stage_and_deletes_a_forgotten_robot_with
         wait_for(lambda: "again.robot1" not in hosts(icinga, "again."), timeout=90, message="robot1 deleted")
         assert len(hosts(icinga, "again.")) == ROBOTS - 1
         assert not services(icinga, "again.robot1")
+        assert stages_counted(running, "ok") == 1  # the deletion's; the restart deployed nothing
     assert stages(icinga, "again") != first and len(stages(icinga, "again")) == 1  # the old one removed
     assert "refused a stage" not in caplog.text and "rejected a stage" not in caplog.text
 
@@ -183,8 +193,9 @@ def test_without_the_package_permissions_robots_are_registered_one_object_a_call
 ) -> None:
     caplog.set_level(logging.INFO, logger="overseer.push")
     robots = [f"narrow/robot{index}" for index in range(ROBOTS)]
-    with exporter(tmp_path, icinga, "narrow", PUSH_USER, robots):
+    with exporter(tmp_path, icinga, "narrow", PUSH_USER, robots) as running:
         wait_for(lambda: all_pushed(icinga, "narrow.", ROBOTS, 3), timeout=120, message="every robot pushed")
         assert "the ApiUser may not deploy config packages" in caplog.text
+        assert (stages_counted(running, "ok"), stages_counted(running, "refused")) == (0, 1)
     assert {host["package"] for host in hosts(icinga, "narrow.").values()} == {"_api"}
     assert not stages(icinga, "narrow")

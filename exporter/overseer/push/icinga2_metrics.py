@@ -18,6 +18,7 @@ class PushStats:
         self._results: dict[str, int] = {"ok": 0}
         self._last_success = 0.0
         self._pending = 0
+        self._stages: dict[str, int] = {}
 
     def delivered(self, count: int, at: float) -> None:
         """`count` results were accepted at unix time `at`."""
@@ -29,6 +30,16 @@ class PushStats:
         """One request failed for `reason` (`connection`, `timeout`, `tls`, `http_401`, `http_500`...)."""
         with self._lock:
             self._results[reason] = self._results.get(reason, 0) + 1
+
+    def staged(self, result: str) -> None:
+        """A config package stage was `ok` (loaded), `rejected` (invalid) or `refused` (not allowed)."""
+        with self._lock:
+            self._stages[result] = self._stages.get(result, 0) + 1
+
+    def stages(self) -> dict[str, int]:
+        """Stages of the config package by result."""
+        with self._lock:
+            return dict(self._stages)
 
     def set_pending(self, count: int) -> None:
         """How many results wait to be delivered (at most one per host and service)."""
@@ -59,6 +70,15 @@ class PushCollector(Collector):
         for result in sorted(results):
             pushes.add_metric([result], float(results[result]))
         yield pushes
+        stages = CounterMetricFamily(
+            "overseer_icinga2_package_stages",
+            "Stages of the exporter's Icinga 2 config package, registering or deleting robots at once, by "
+            "result: ok, rejected (Icinga's validation failed) or refused (the ApiUser may not)",
+            labels=["result"],
+        )
+        for result, count in sorted(self._stats.stages().items()):
+            stages.add_metric([result], float(count))
+        yield stages
         yield GaugeMetricFamily(
             "overseer_icinga2_last_success_timestamp_seconds",
             "Unix time of the last check result Icinga 2 accepted (0: none yet)",

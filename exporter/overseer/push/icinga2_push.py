@@ -29,7 +29,7 @@ from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
-from overseer.push.icinga2_results import CheckResult, awaiting, robot_groups, robot_results, robot_signature
+from overseer.push.icinga2_results import CheckResult, Signatures, awaiting, robot_groups, robot_results
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
@@ -78,6 +78,7 @@ class Icinga2Push:
         self._urgent: dict[tuple[str, str], CheckResult] = {}
         self._pending: dict[tuple[str, str], CheckResult] = {}
         self._signatures: dict[str, tuple[object, ...]] = {}
+        self._levels = Signatures()
         self._due: dict[str, float] = {}
         self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
         self._robot_hosts: dict[str, str] = {}  # robot → host, for every robot being pushed
@@ -138,7 +139,7 @@ class Icinga2Push:
             maintenance = (
                 None if state is None else Maintenance(state.window, state.until, state.author, state.comment)
             )
-            signature = (*robot_signature(snapshot, robot), state)
+            signature = (*self._levels.of(snapshot, robot), state)
             changed = signature != self._signatures.get(robot.name)
             if not changed and now < self._due.get(robot.name, 0.0):
                 continue
@@ -166,6 +167,7 @@ class Icinga2Push:
         for gone in [name for name in self._robot_hosts if name not in present]:
             host = self._robot_hosts.pop(gone)
             self._signatures.pop(gone, None)
+            self._levels.forget(gone)
             self._due.pop(gone, None)
             self._groups.pop(gone, None)
             self._labels.forget(host)
@@ -273,7 +275,9 @@ class Icinga2Push:
         kept = {host: services for host, services in self._packaged.items() if host not in hosts}
         try:
             self._deploy(kept, lambda: not self._exists(hosts[0]))
+            self.stats.staged("ok")
         except (PackageRefused, PackageRejected) as error:
+            self.stats.staged("refused" if isinstance(error, PackageRefused) else "rejected")
             log.warning(
                 "Icinga 2 refused a stage of package %s without the %d forgotten robots' hosts (%s): they "
                 "stay in Icinga 2 until a stage is accepted",
@@ -305,6 +309,7 @@ class Icinga2Push:
         try:
             self._deploy({**self._packaged, **wanted}, lambda: self._exists(first))
         except PackageRefused as error:
+            self.stats.staged("refused")
             log.info(
                 "Icinga 2 registers robots one object a call: the ApiUser may not deploy config packages "
                 "(%s); with config/query and config/modify a fleet's robots are registered at once",
@@ -313,6 +318,7 @@ class Icinga2Push:
             self._package = None
             return
         except PackageRejected as error:
+            self.stats.staged("rejected")
             log.warning(
                 "Icinga 2 rejected a stage of package %s registering %d robots (%s): registering them one "
                 "object a call for %gs",
@@ -323,6 +329,7 @@ class Icinga2Push:
             )
             self._package_paused_until = now + PACKAGE_PAUSE_SECONDS
             return
+        self.stats.staged("ok")
         for host, services in wanted.items():
             self._packaged[host] = services
             self._created[host] = set(services)

@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass
 
 from overseer.model import FleetSnapshot, RobotState
+from overseer.model.snapshot import RobotTiming
 from overseer.push.icinga2_names import (
     ROBOT_SERVICE,
     group_of,
@@ -52,6 +53,35 @@ def robot_signature(snapshot: FleetSnapshot, robot: RobotState) -> tuple[object,
     """What a change of must be pushed at once: up or down, and every component's level now."""
     up = snapshot.robot_up(robot)
     return (up, tuple(robot.components), tuple(snapshot.component_levels(robot, up)))
+
+
+class Signatures:
+    """Each robot's `robot_signature`, worked out again only when a revision, up or staleness changed.
+
+    At 10,000 robots, working every one out at every look of the push took a third of a core: a robot
+    republishing the same array keeps its revision, and its staleness holds between messages.
+    """
+
+    def __init__(self) -> None:
+        """Nothing known yet."""
+        self._known: dict[str, tuple[tuple[object, ...], RobotTiming, tuple[object, ...]]] = {}
+
+    def of(self, snapshot: FleetSnapshot, robot: RobotState) -> tuple[object, ...]:
+        """`robot_signature(snapshot, robot)`, from what was kept when nothing it depends on changed."""
+        # A robot forgotten and followed again starts its revisions over: its discovery tells them apart.
+        revision = (robot.revision, robot.discovered_at)
+        known = self._known.get(robot.name)
+        timing = known[1] if known is not None and known[0][0] == revision else snapshot.timing(robot)
+        key = (revision, snapshot.robot_up(robot), snapshot.staleness(robot, timing))
+        if known is not None and known[0] == key:
+            return known[2]
+        signature = robot_signature(snapshot, robot)
+        self._known[robot.name] = (key, timing, signature)
+        return signature
+
+    def forget(self, name: str) -> None:
+        """A robot gone from the fleet."""
+        self._known.pop(name, None)
 
 
 def awaiting(snapshot: FleetSnapshot, robot: RobotState) -> bool:

@@ -1,0 +1,61 @@
+"""The push's kept signatures are always what working each robot out again gives."""
+
+from __future__ import annotations
+
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.push.icinga2_results import Signatures, robot_signature
+
+
+class Clock:
+    """A monotonic clock the test moves."""
+
+    def __init__(self) -> None:
+        """Start at 100 s."""
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        """The time now."""
+        return self.now
+
+
+def array(*levels: int) -> DiagnosticArray:
+    """An aggregator's array, one component a level."""
+    statuses = tuple(
+        DiagnosticStatus(level, f"/Power/part{i}", "m", "hw", ()) for i, level in enumerate(levels)
+    )
+    return DiagnosticArray(0, 0, "", statuses)
+
+
+def test_kept_signatures_follow_levels_staleness_down_and_a_robot_followed_again() -> None:
+    clock = Clock()
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, stale_periods=1), clock=clock)
+    signatures = Signatures()
+    seen = []
+
+    def look() -> None:
+        snapshot = model.snapshot()
+        for robot in snapshot.robots:
+            kept = signatures.of(snapshot, robot)
+            assert kept == robot_signature(snapshot, robot), (robot.name, clock.now)
+            seen.append(kept)
+
+    model.apply("a", array(0, 0), "dds")
+    model.apply("b", array(0, 0), "dds")
+    look()
+    clock.now += 1
+    model.apply("a", array(0, 0), "dds")  # the same again
+    look()
+    model.apply("a", array(0, 2), "dds")  # a level changed
+    look()
+    clock.now += 6  # b's components STALE, a's too
+    model.apply("a", array(0, 2), "dds")
+    look()
+    clock.now += 30  # b down
+    model.apply("a", array(0, 2), "dds")
+    look()
+    assert model.retire("b") == "retired"
+    signatures.forget("b")
+    model.apply("b", array(1), "dds")  # followed again, its revisions start over
+    look()
+    assert len(set(seen)) >= 5
