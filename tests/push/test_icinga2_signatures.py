@@ -34,11 +34,14 @@ def test_kept_signatures_follow_levels_staleness_down_and_a_robot_followed_again
     seen = []
 
     def look() -> None:
-        snapshot = model.snapshot()
-        for robot in snapshot.robots:
-            kept = signatures.of(snapshot, robot)
-            assert kept == robot_signature(snapshot, robot), (robot.name, clock.now)
-            seen.append(kept)
+        # Twice: now, and a little later with nothing heard (the versions looked at last, kept).
+        for _ in range(2):
+            snapshot = model.snapshot()
+            for robot in snapshot.robots:
+                kept = signatures.of(snapshot, robot)
+                assert kept == robot_signature(snapshot, robot), (robot.name, clock.now)
+                seen.append(kept)
+            clock.now += 0.5
 
     model.apply("a", array(0, 0), "dds")
     model.apply("b", array(0, 0), "dds")
@@ -48,7 +51,8 @@ def test_kept_signatures_follow_levels_staleness_down_and_a_robot_followed_again
     look()
     model.apply("a", array(0, 2), "dds")  # a level changed
     look()
-    clock.now += 6  # b's components STALE, a's too
+    clock.now += 3.5  # b's components STALE a moment after this look, not heard since
+    look()
     model.apply("a", array(0, 2), "dds")
     look()
     clock.now += 30  # b down
