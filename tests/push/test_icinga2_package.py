@@ -37,15 +37,19 @@ from testbed.processes import wait_for
 pytestmark = pytest.mark.servers
 
 ROBOTS = 30  # a host, its robot service and two group services each: 120 objects at once
+HANDMADE = """object Host "clash.robot3" {
+	check_command = "dummy"
+	vars.owner = "operator"
+}
+"""
 HOSTILE = 'robot "7" \\ é\tbad'  # quotes, a backslash, UTF-8 and a control character in vars.ros_robot
 
 
 @pytest.fixture(scope="module")
 def icinga(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Icinga2]:
-    """Icinga 2 with the push ApiUser example, as it is and with config packages allowed."""
-    with running_icinga2(
-        tmp_path_factory.mktemp("icinga2"), push_api_user() + push_bulk_api_user()
-    ) as daemon:
+    """The push ApiUser example, as it is and with config packages allowed, and an operator's host."""
+    users = push_api_user() + push_bulk_api_user()
+    with running_icinga2(tmp_path_factory.mktemp("icinga2"), users + HANDMADE) as daemon:
         yield daemon
 
 
@@ -200,3 +204,21 @@ def test_without_the_package_permissions_robots_are_registered_one_object_a_call
         assert (stages_counted(running, "ok"), stages_counted(running, "refused")) == (0, 1)
     assert {host["package"] for host in hosts(icinga, "narrow.").values()} == {"_api"}
     assert not stages(icinga, "narrow")
+
+
+def test_a_stage_icinga_rejects_changes_nothing_and_robots_are_registered_one_a_call(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"clash/robot{index}" for index in range(ROBOTS)]  # clash.robot3 is an operator's host
+    with exporter(tmp_path, icinga, "clash", PUSH_BULK_USER, robots) as running:
+        wait_for(lambda: len(hosts(icinga, "clash.")) == ROBOTS, timeout=120, message="every host")
+        wait_for(lambda: all_pushed(icinga, "clash.robot0", 1, 3), timeout=60, message="robot0 pushed")
+        assert "Icinga 2 rejected a stage of package overseer-clash registering 30 robots" in caplog.text
+        assert "re-defined" in caplog.text  # Icinga's own reason, from the stage's startup log
+        assert "host clash.robot3 exists and was not made by this exporter" in caplog.text
+        assert (stages_counted(running, "rejected"), stages_counted(running, "ok")) == (1, 0)
+    made = hosts(icinga, "clash.")
+    assert made["clash.robot3"]["vars"] == {"owner": "operator"}  # left alone
+    assert {host["package"] for name, host in made.items() if name != "clash.robot3"} == {"_api"}
+    assert not stages(icinga, "clash")  # the rejected stage is not kept
