@@ -28,7 +28,9 @@ same Prometheus, a static server answering the exporter's own bytes: Prometheus'
 `--rules`, then a Prometheus with the shipped default config and rules (scraping every
 `--scrape-interval`) gives each rule group's evaluation time as a share of its interval (target <= 10 %,
 with the generator's 2 % of robots in trouble), and the rules that cost the most, from /api/v1/rules.
-The lost updates then cover the whole run, Prometheus included.
+The lost updates then cover the whole run, Prometheus included. With `--page`, after the window and
+while the fleet goes on publishing, Debian's Chromium loads the status page (the fleet, then one robot:
+first render, target <= 1 s) and `/api/v1/robots` and the newest page of `/api/v1/events` are timed.
 """
 
 from __future__ import annotations
@@ -49,12 +51,14 @@ from typing import NamedTuple
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
 from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, static_server
+from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
 from bench.loadgen import add_shape_arguments, running_loadgen, shape_arguments, shape_of
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
+from testbed.browser import headless_chromium
 from testbed.ports import fresh_domain_id
 from testbed.processes import RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
@@ -65,6 +69,8 @@ FLOOR_RATIO = 1.3  # Prometheus's scrape of the exporter against its scrape of t
 RULE_SHARE_SHOWN = 0.5  # % of the group's interval: the rules that cost at least this get a row
 CHECK_RUNS = 10
 CHECK_SECONDS = 15  # the check is timed in the window's last seconds, while the fleet publishes
+PAGE_SECONDS = 90  # the generator publishes this much longer while Chromium loads the status page
+PAGE_LOADS = 3
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
 
 
@@ -217,6 +223,21 @@ def check_rows(url: str, robot: str, runs: int = CHECK_RUNS) -> list[Row]:
     ]
 
 
+def page_rows(url: str, robot: str) -> list[Row]:
+    """The status page's first render in Chromium, the JSON it reads and the event history, under traffic."""
+    with headless_chromium() as browser:
+        fleet = first_render_ms(browser, url + "/", "fleet", PAGE_LOADS)
+        one = first_render_ms(browser, f"{url}/?robot={robot}", "robot", PAGE_LOADS)
+    robots_ms, robots_bytes = get_ms(url + "/api/v1/robots", PAGE_LOADS)
+    events_ms, _ = get_ms(url + "/api/v1/events?limit=100", PAGE_LOADS)
+    return [
+        Row("scale", "status page first render, fleet view", fleet, "ms", "<= 1000", fleet <= 1000),
+        Row("scale", "status page first render, one robot", one, "ms", "<= 1000", one <= 1000),
+        Row("scale", f"GET /api/v1/robots ({robots_bytes / 1e6:.1f} MB)", robots_ms, "ms"),
+        Row("scale", "GET /api/v1/events?limit=100 (the newest events)", events_ms, "ms"),
+    ]
+
+
 def rule_times(
     prometheus: Prometheus, readings: int = 5, apart: float = 15.0
 ) -> dict[tuple[str, str], float]:
@@ -285,12 +306,14 @@ def run(
     transport: str = ZENOH,
     rate: float = 1.0,
     floor: bool = False,
+    page: bool = False,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
     `floor`: a subscriber that only counts (`bench.zenoh_counter`, the exporter's token subscription
     too) hears the same fleet through the same router in the same run: the samples the router itself
-    does not deliver.
+    does not deliver. `page`: after the window, while the fleet goes on publishing, Chromium loads the
+    status page and the JSON API and event history are read.
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
@@ -300,6 +323,7 @@ def run(
     publishing = seconds + (
         phases * (prometheus_seconds + 2 * interval) + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0
     )
+    publishing += PAGE_SECONDS if page else 0
     with (
         tempfile.TemporaryDirectory() as tmp,
         wiring(transport, Path(tmp)) as wires,
@@ -336,6 +360,9 @@ def run(
                 time.sleep(max(0.0, steady_until - time.monotonic()))
                 steady_cpu = (tree_cpu_seconds(pid) - steady_cpu) / (time.monotonic() - steady_from)
                 checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
+                if page:
+                    time.sleep(max(0.0, started + seconds - time.monotonic()))
+                    checks += page_rows(exporter.url, "robot1")
                 if prometheus_seconds:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
                     prometheus_rows = scrape_against_floor(
@@ -346,8 +373,8 @@ def run(
                             exporter.url, Path(tmp) / "rules", prometheus_seconds, interval
                         )
                     figures = loadgen.finish()
-                else:
-                    figures = loadgen.figures(seconds + 600)
+                else:  # with the page measured, the generator's margin need not run out
+                    figures = loadgen.finish() if page else loadgen.figures(seconds + 600)
         time.sleep(SETTLE_SECONDS)
         elapsed = time.monotonic() - started
         cpu = tree_cpu_seconds(pid) - started_cpu
@@ -438,6 +465,11 @@ def main() -> None:
         action="store_true",
         help="a subscriber that only counts hears the fleet beside the exporter (Zenoh): the router's losses",
     )
+    parser.add_argument(
+        "--page",
+        action="store_true",
+        help="then Chromium loads the status page, the JSON API and event history are read, under traffic",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args()
     rows: list[Row] = []
@@ -454,6 +486,7 @@ def main() -> None:
                 options.transport,
                 options.rate,
                 options.floor,
+                options.page,
             )
     emit(rows)
 

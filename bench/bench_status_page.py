@@ -45,10 +45,10 @@ def fill(model: FleetModel, robots: int) -> None:
         ingest(encode_diagnostic_array(array))
 
 
-def first_render_ms(browser: Browser, url: str, view: str) -> float:
-    """Median time from navigation start to the page's first render, over `LOADS` fresh loads."""
+def first_render_ms(browser: Browser, url: str, view: str, loads: int = LOADS) -> float:
+    """Median time from navigation start to the page's first render, over `loads` fresh loads."""
     timings = []
-    for _ in range(LOADS):
+    for _ in range(loads):
         context = browser.new_context(viewport={"width": 1280, "height": 900})
         page = context.new_page()
         page.goto(url)

@@ -45,3 +45,21 @@ def test_a_small_fleet_at_two_hertz_is_published_measured_and_labelled_as_asked(
     assert 0 <= row("the first look (until changes take under 1 s)").value < SECONDS
     after = next(row for figure, row in rows.items() if "after the first look, p99" in figure)
     assert 0 < after.value < 5 and after.target == "<= 1"
+    assert not any("status page" in figure for figure in rows)  # only when asked for
+
+
+def test_the_status_page_and_the_api_are_timed_while_the_fleet_goes_on_publishing() -> None:
+    shape = FleetShape(robots=ROBOTS, components=COMPONENTS)
+    rows = {row.figure: row for row in run(shape, workers=2, seconds=SECONDS / 2, page=True)}
+    label = "20 robots x 20, realistic, zenoh, 2 workers"
+
+    def row(figure: str) -> Row:
+        return rows[f"{label}: {figure}"]
+
+    for view in ("fleet view", "one robot"):
+        first_render = row(f"status page first render, {view}")
+        assert 0 < first_render.value < 10_000 and first_render.target == "<= 1000"
+    robots = next(row for figure, row in rows.items() if "GET /api/v1/robots (" in figure)
+    assert 0 < robots.value < 10_000 and robots.unit == "ms"
+    assert 0 < row("GET /api/v1/events?limit=100 (the newest events)").value < 10_000
+    assert row("lost updates").value == 0  # the generator was stopped, not cut off, after the page
