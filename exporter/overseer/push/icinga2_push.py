@@ -295,10 +295,15 @@ class Icinga2Push:
         if self._package is None or now < self._package_paused_until:
             return
         assert self._created is not None
+        created, foreign = self._created, self._foreign
+        # Every robot's host made, as almost always once the fleet is registered: no result to look at.
+        unmade = {host for host in self._robot_hosts.values() if host not in created and host not in foreign}
+        if not unmade:
+            return
         wanted: dict[str, set[str]] = {}
         for queue in (self._urgent, self._pending):
             for host, service in queue:
-                if host not in self._created and host not in self._foreign:
+                if host in unmade:
                     services = wanted.setdefault(host, set())
                     if service:
                         services.add(service)
