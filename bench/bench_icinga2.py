@@ -211,10 +211,9 @@ def rows_for(robots: int, options: argparse.Namespace, tmp: Path) -> list[Row]:
             round(push["register"], 1),
             "s",
         ),
-        Row(name, "push: icinga2 CPU per result", per_result(push), "ms"),
     ]
     if options.push_only:
-        return push_rows
+        return [*push_rows, Row(name, "push: icinga2 CPU per result", per_result(push), "ms")]
     poll = poll_phase(robots, options, tmp)
     return [
         Row(name, "active checks: icinga2 CPU, own", share(poll["icinga2"]), "% core"),
@@ -223,15 +222,7 @@ def rows_for(robots: int, options: argparse.Namespace, tmp: Path) -> list[Row]:
         ),
         Row(name, "active checks: exporter CPU (API for the checks)", share(poll["exporter"]), "% core"),
         Row(name, "active checks: service results per minute", poll["checks/min"], "/min"),
-        Row(name, "push: icinga2 CPU", share(push["icinga2+checks"]), "% core"),
-        Row(name, "push: exporter CPU (push loop)", share(push["exporter"]), "% core"),
-        Row(name, "push: service results per minute", push["checks/min"], "/min"),
-        Row(
-            name,
-            "push: time to register every robot and push its first results",
-            round(push["register"], 1),
-            "s",
-        ),
+        *push_rows,
         Row(
             name,
             "icinga2 CPU, active checks with plugins / push",
