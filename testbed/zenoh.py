@@ -22,11 +22,17 @@ def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
 
 
-def start_router(tmp_path: Path, port: int, timeout: float = 20.0) -> RunningProcess:
-    """Start a router listening on 127.0.0.1:`port` and wait until it accepts connections."""
+def start_router(
+    tmp_path: Path, port: int, timeout: float = 20.0, zenoh_defaults: bool = False
+) -> RunningProcess:
+    """Start a router listening on 127.0.0.1:`port` and wait until it accepts connections.
+
+    It runs with the shipped router configuration, or with Zenoh's defaults when `zenoh_defaults`.
+    """
     log_path = tmp_path / f"zenoh-router-{port}-{time.monotonic_ns()}.log"
     # As a module, not a script: a script's own folder would shadow the zenoh package with this file.
     args = [sys.executable, "-m", "testbed.zenoh_router", str(port)]
+    args += ["--zenoh-defaults"] if zenoh_defaults else []
     router = RunningProcess(spawn(args, log_path, env={"PYTHONPATH": str(REPO)}), log_path)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -53,10 +59,12 @@ def running_router(tmp_path: Path, port: int | None = None) -> Iterator[int]:
 
 
 @contextmanager
-def running_router_process(tmp_path: Path) -> Iterator[tuple[int, RunningProcess]]:
+def running_router_process(
+    tmp_path: Path, zenoh_defaults: bool = False
+) -> Iterator[tuple[int, RunningProcess]]:
     """A router on a free loopback port for the block; yields its port and its process (for its CPU)."""
     port = free_port()
-    router = start_router(tmp_path, port)
+    router = start_router(tmp_path, port, zenoh_defaults=zenoh_defaults)
     try:
         yield port, router
     finally:
