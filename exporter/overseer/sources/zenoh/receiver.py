@@ -7,9 +7,9 @@ with wildcards, so robots that start later, or were built against another revisi
 attachment and payload; a token as its key and whether it came or went. Routers that are not up yet are
 retried until they are.
 
-The samples queue in channels that Zenoh fills without Python's interpreter lock, and a thread of ours
-drains each: a Python callback would hold Zenoh's receiving thread on the lock for every sample, so a busy
-moment in Python would stall the link and the router would drop samples.
+The samples and the tokens queue in channels that Zenoh fills without Python's interpreter lock, and a
+thread of ours drains each: a Python callback would hold Zenoh's receiving thread on the lock for every
+sample or token, so a busy moment in Python would stall the link and the router would drop samples.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ log = logging.getLogger(__name__)
 
 RETRY_MIN_SECONDS = 0.5
 RETRY_MAX_SECONDS = 10.0
+MAX_WAITING_TOKENS = 200_000  # a fleet's tokens, heard at once (two a robot): beyond, Zenoh's thread waits
 
 SampleHandler = Callable[[str, bytes | None, bytes], None]  # key, attachment, payload
 TokenHandler = Callable[[str, bool], None]  # key, alive
@@ -96,18 +97,22 @@ class ZenohReceiver:
         if session is None:
             return
         domain, formats = self._config.domain, self._config.key_formats
-        # Declared without the lock held: the liveliness history is delivered to `_token` at once.
+        # Declared without the lock held: `stop` may wait for it meanwhile.
         declared: list[zenoh.Subscriber[Any]] = []
         for key in data_subscriptions(domain, formats):
             subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
             declared.append(subscriber)
-            drain = threading.Thread(target=self._drain, args=(subscriber.handler,), name="zenoh-data")
-            drain.daemon = True
-            drain.start()
+            self._start_drain(subscriber.handler, self._sample, "zenoh-data")
         liveliness = session.liveliness()
         tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
         tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
-        declared += [liveliness.declare_subscriber(key, self._token, history=True) for key in tokens]
+        # Tokens wait in a channel too: a callback would hold the link's receiving thread on the
+        # interpreter lock for each of them (a fleet's 20,000 at once), and the router would drop the
+        # samples that came meanwhile.
+        for key in tokens:
+            subscriber = liveliness.declare_subscriber(key, FifoChannel(MAX_WAITING_TOKENS), history=True)
+            declared.append(subscriber)
+            self._start_drain(subscriber.handler, self._token, "zenoh-tokens")
         with self._lock:
             stopped = self._stop.is_set()
             if not stopped:
@@ -131,7 +136,11 @@ class ZenohReceiver:
             delay = min(delay * 2, RETRY_MAX_SECONDS)
         return None
 
-    def _drain(self, channel: Any) -> None:
+    def _start_drain(self, channel: Any, handle: Callable[[zenoh.Sample], None], name: str) -> None:
+        """Drain `channel` into `handle` on a thread of its own."""
+        threading.Thread(target=self._drain, args=(channel, handle), name=name, daemon=True).start()
+
+    def _drain(self, channel: Any, handle: Callable[[zenoh.Sample], None]) -> None:
         """Hand every sample of one subscription's channel on, in batches, until it is closed."""
 
         def wait() -> zenoh.Sample | None:
@@ -148,7 +157,7 @@ class ZenohReceiver:
                 return None
             return sample
 
-        drain_paced(wait, poll, self._sample, self._stop.is_set)
+        drain_paced(wait, poll, handle, self._stop.is_set)
 
     def _sample(self, sample: zenoh.Sample) -> None:
         self.samples_heard += 1
