@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from overseer.config.metrics import MESSAGE_LABEL_MODES
 from overseer.fleet import exposition as exposition_module
+from overseer.fleet.deflated import Deflated, inflate
 from overseer.fleet.message_labels import MessageLabels
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
@@ -138,51 +139,96 @@ def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     assert all(rendering.exposition._robots[name] is lines for name, lines in cached.items())
 
 
-def three_components_rendered(level: int) -> tuple[Rendering, Callable[[], None]]:
-    """Robot9 of three components at `level`, rendered once; and what changes the second one's value."""
+def three_components_rendered(level: int) -> tuple[Rendering, Callable[[], None], Callable[[], None]]:
+    """Robot9 of three components at `level`, rendered once; what changes its second's value; its level."""
     model, _ = fleet()
     rendering = Rendering(model)
     three = tuple(DiagnosticStatus(level, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
     model.apply("robot9", DiagnosticArray(0, 0, "", three), "dds")
     rendering.fast()
-    changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
 
     def change_a_value() -> None:
+        changed = (three[0], three[1]._replace(values=(("v", "7"),)), three[2])
         model.apply("robot9", DiagnosticArray(0, 0, "", changed), "dds")
 
-    return rendering, change_a_value
+    def change_a_level() -> None:
+        changed = (three[0], three[1]._replace(level=2, values=(("v", "7"),)), three[2])
+        model.apply("robot9", DiagnosticArray(0, 0, "", changed), "dds")
+
+    return rendering, change_a_value, change_a_level
 
 
-def test_a_changed_component_is_rendered_again_and_the_others_are_copied(
+def record_rendering(monkeypatch: pytest.MonkeyPatch) -> tuple[list[tuple[str, int]], list[int]]:
+    """The (family, component index) of every line rendered from now on, and the sizes of pieces inflated."""
+    rendered: list[tuple[str, int]] = []
+    inflated: list[int] = []
+    for family in ("level", "changes", "values", "message"):
+        original = getattr(exposition_module._ComponentLines, family)
+
+        def recording(
+            self: exposition_module._ComponentLines,
+            index: int,
+            family: str = family,
+            original: Callable[[exposition_module._ComponentLines, int], bytes] = original,
+        ) -> bytes:
+            rendered.append((family, index))
+            return original(self, index)
+
+        monkeypatch.setattr(exposition_module._ComponentLines, family, recording)
+
+    def recording_inflate(piece: Deflated) -> bytes:
+        inflated.append(piece.size)
+        return inflate(piece)
+
+    monkeypatch.setattr(exposition_module, "inflate", recording_inflate)
+    return rendered, inflated
+
+
+def test_a_changed_value_renders_only_its_components_values_and_copies_the_rest(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    rendering, change_a_value = three_components_rendered(0)
-    rendered: list[bytes] = []
-    original_add = exposition_module._LinesBuilder.add
-
-    def counting_add(self: exposition_module._LinesBuilder, index: int, *family_lines: bytes) -> None:
-        rendered.append(family_lines[0])
-        original_add(self, index, *family_lines)
-
-    monkeypatch.setattr(exposition_module._LinesBuilder, "add", counting_add)
+    rendering, change_a_value, _ = three_components_rendered(1)  # WARN: a status-message line each
+    before = rendering.exposition._robots["robot9"]
+    rendered, inflated = record_rendering(monkeypatch)
     change_a_value()
     fast, reference = rendering.both(TEXT)
     assert fast == reference
-    assert len(rendered) == 1 and b'component="/c1"' in rendered[0]
-    assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and len(rendered) == 1
+    # Its level, level changes and message are as they were: those families are neither rendered
+    # nor inflated, and keep their compressed piece.
+    assert rendered == [("values", 1)]
+    after = rendering.exposition._robots["robot9"]
+    assert inflated == [before.values.size]
+    assert after.levels is before.levels and after.changes is before.changes
+    assert after.messages is before.messages and after.values != before.values
+    assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and rendered == [("values", 1)]
+
+
+def test_a_changed_level_renders_its_components_level_changes_and_message_lines(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rendering, _, change_a_level = three_components_rendered(1)
+    rendered, _ = record_rendering(monkeypatch)
+    change_a_level()
+    fast, reference = rendering.both(TEXT)
+    assert fast == reference
+    assert sorted(rendered) == [("changes", 1), ("level", 1), ("message", 1), ("values", 1)]
 
 
 def test_a_family_whose_lines_come_out_the_same_keeps_its_compressed_piece() -> None:
-    rendering, change_a_value = three_components_rendered(1)  # WARN: a status-message line each
+    model, _ = fleet()
+    rendering = Rendering(model, value_keys="v")
+    statuses = (DiagnosticStatus(1, "/c0", "warm", "", (("v", "1"), ("raw", "5"))),)
+    model.apply("robot9", DiagnosticArray(0, 0, "", statuses), "dds")
+    rendering.fast()
     before = rendering.exposition._robots["robot9"]
-    change_a_value()
+    # A value that is not exported changed: its values are rendered again, and come out the same bytes.
+    model.apply(
+        "robot9", DiagnosticArray(0, 0, "", (statuses[0]._replace(values=(("v", "1"), ("raw", "6"))),)), "dds"
+    )
     fast, reference = rendering.both(TEXT)
     assert fast == reference
     after = rendering.exposition._robots["robot9"]
-    # Only a value changed: the levels, level changes and messages are the same bytes, not compressed again.
-    assert (after.levels, after.changes, after.messages) == (before.levels, before.changes, before.messages)
-    assert after.levels is before.levels and after.changes is before.changes
-    assert after.messages is before.messages and after.values != before.values
+    assert after is not before and after.values is before.values
 
 
 # Property: through any sequence of model changes, the cached exposition equals the collector's.

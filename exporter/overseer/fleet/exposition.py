@@ -11,6 +11,7 @@ prometheus-client's rendering of the same fleet.
 
 from __future__ import annotations
 
+import itertools
 import re
 import threading
 from array import array
@@ -26,7 +27,7 @@ from overseer.fleet.metric_values import NumericValues
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.model.snapshot import RobotTiming
-from overseer.model.state import learned_period
+from overseer.model.state import ComponentKey, learned_period
 
 # prometheus-client's number format (Go's), so values render exactly as its families' do.
 go_float = cast(Callable[[float], str], floatToGoString)
@@ -43,10 +44,12 @@ class _RobotLines:
 
     `levels`, `changes`, `values` and `messages` hold every component's lines of each family, deflated
     (`deflated`: a tenth of the memory, and a scrape sends them as they are); component i's lines of
-    family k start at `offsets[FAMILIES * i + k]` of the family's text. `components` are the records
-    they were rendered from (None for those missing from their feed's latest message): a component whose
-    record is the same object again renders the same lines (when the robot's up, timing and staleness did
-    not change), so they are copied instead.
+    family k start at `offsets[(count + 1) * k + i]` of the family's text, where `count` components
+    were rendered (`offsets[(count + 1) * k + count]` is the family's length). `components` are the
+    records they were rendered from (None for those missing from their feed's latest message), and
+    `component_levels` their levels as rendered: a component whose record is the same object again
+    renders the same lines (when the robot's up, timing and staleness did not change), so they are
+    copied instead, and a new record renders again only the families whose fields it changed.
     """
 
     signature: tuple[tuple[int, float], bool, tuple[int, ...]]
@@ -60,7 +63,12 @@ class _RobotLines:
     values: Deflated
     messages: Deflated
     components: tuple[Component | None, ...]
+    component_levels: bytes
     offsets: array[int]
+
+    def family(self, family: int) -> Deflated:
+        """The lines of family `family` (0 levels, 1 level changes, 2 values, 3 status messages)."""
+        return (self.levels, self.changes, self.values, self.messages)[family]
 
 
 class FleetExposition:
@@ -171,48 +179,28 @@ def _lines_for(
         return cached
     # Only the bytes are kept between scrapes (memory is the limit at 100,000 components); the
     # per-render caches make rendering cheap, since a fleet repeats its names, keys and values.
-    escape, number, pairs, message_label = render.escape, render.number, render.numbers.pairs, render.message
-    with_changes = render.level_changes
-    robot_label = f'robot="{escape(robot.name)}"'
-    reusable = (
-        cached.components
+    # Lines copied from the cache must have been rendered with the same up, staleness and timing.
+    copyable = (
+        cached
         if cached is not None and cached.signature[1:] == signature[1:] and cached.timing == timing
-        else ()
+        else None
     )
-    lines = _LinesBuilder(cached)
     missing = robot.missing
     levels = snapshot.component_levels(robot, up)
     items = list(robot.components.items())
-    # A component whose record is the same object at the same place, while neither up nor freshness
-    # changed, renders the same lines: only the others are rendered, the rest is copied.
-    to_render = [
-        index
-        for index, (old, (key, component)) in enumerate(zip(reusable, items, strict=False))
-        if old is not component or key in missing
-    ]
-    to_render.extend(range(len(reusable), len(items)))
-    for index in to_render:
-        component = items[index][1]
-        identity = f'component="{escape(component.name)}",hardware_id="{escape(component.hardware_id)}"'
-        labels = f"{{{identity},{robot_label}}} "
-        values = "".join(
-            [
-                f'ros_diagnostics_value{{{identity},key="{escape(key)}",{robot_label}}} {number(value)}\n'
-                for key, value in pairs(component.values)
-            ]
+    lines = _ComponentLines(items, levels, f'robot="{render.escape(robot.name)}"', render)
+    to_render = (
+        _lines_to_render(copyable.components, copyable.component_levels, items, missing, levels)
+        if copyable is not None
+        else (list(range(len(items))),) * FAMILIES
+    )
+    offsets: array[int] = array("I")
+    levels_lines, changes, values, messages = (
+        _family_lines(cached, family, indices, len(items), render_line, offsets)
+        for family, (indices, render_line) in enumerate(
+            zip(to_render, (lines.level, lines.changes, lines.values, lines.message), strict=True)
         )
-        level = levels[index]
-        message = message_label(component)
-        lines.add(
-            index,
-            f"ros_diagnostics_level{labels}{_LEVEL_VALUES[level]}\n".encode(),
-            f"ros_diagnostics_level_changes_total{labels}{number(float(component.level_changes))}\n".encode()
-            if with_changes
-            else b"",
-            values.encode(),
-            b"" if message is None else _status_message_line(identity, level, message, robot_label),
-        )
-    level_lines, changes, values_lines, message_lines, offsets = lines.finish(len(levels))
+    )
     # A component missing from its feed's latest message renders by its own time: never copied (None).
     records = (
         tuple(component if key not in missing else None for key, component in items)
@@ -223,14 +211,15 @@ def _lines_for(
         signature,
         timing,
         worst(levels) if up else Level.STALE,
-        _info_line(robot, escape) if cached is None or not same_revision else cached.info,
-        _counts_lines(robot_label, levels, number),
-        _ROBOT_CHANGES.format(robot_label, number(robot.level_changes)).encode(),
-        level_lines,
+        _info_line(robot, render.escape) if cached is None or not same_revision else cached.info,
+        _counts_lines(lines.robot_label, levels, render.number),
+        _ROBOT_CHANGES.format(lines.robot_label, render.number(robot.level_changes)).encode(),
+        levels_lines,
         changes,
-        values_lines,
-        message_lines,
+        values,
+        messages,
         records,
+        bytes(levels),
         offsets,
     )
 
@@ -238,86 +227,179 @@ def _lines_for(
 FAMILIES = 4  # per-component families: levels, level changes, values, status messages
 
 
-class _LinesBuilder:
-    """Builds a robot's per-component families of lines from new lines and, between them, the cached ones."""
+def _lines_to_render(
+    reusable: tuple[Component | None, ...],
+    reusable_levels: bytes,
+    items: list[tuple[ComponentKey, Component]],
+    missing: frozenset[ComponentKey],
+    levels: list[Level],
+) -> tuple[list[int], list[int], list[int], list[int]]:
+    """The components to render again in each family, in order; the lines of the others can be copied.
 
-    def __init__(self, cached: _RobotLines | None) -> None:
-        self._cached = cached
-        self._cached_text: list[bytes | None] = [None] * FAMILIES  # its families, inflated when needed
-        self._pieces: tuple[list[bytes], ...] = tuple([] for _ in range(FAMILIES))
-        self._sizes = [0] * FAMILIES
-        self._offsets = array("I", self._sizes)
-        self._next = 0  # the first component not yet in the pieces
+    `reusable` are the records the cached lines were rendered from, at the same indices, and
+    `reusable_levels` their levels then. A record replaced by another renders again only the families
+    whose fields changed: in a fleet most changes are values (a voltage, a temperature), and then the
+    levels, level changes and status messages are copied, compressed, as they were.
+    """
+    level_lines: list[int] = []
+    change_lines: list[int] = []
+    value_lines: list[int] = []
+    message_lines: list[int] = []
+    for index, (old, (key, component)) in enumerate(zip(reusable, items, strict=False)):
+        if old is component and key not in missing:
+            continue
+        if old is None or key in missing or old.key != key or old.hardware_id != component.hardware_id:
+            for family in (level_lines, change_lines, value_lines, message_lines):
+                family.append(index)
+            continue
+        level_moved = levels[index] != reusable_levels[index]
+        if level_moved:
+            level_lines.append(index)
+        if old.level_changes != component.level_changes:
+            change_lines.append(index)
+        if old.values != component.values:
+            value_lines.append(index)
+        # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
+        if level_moved or old.level != component.level or old.message != component.message:
+            message_lines.append(index)
+    new = range(len(reusable), len(items))
+    for family in (level_lines, change_lines, value_lines, message_lines):
+        family.extend(new)
+    return level_lines, change_lines, value_lines, message_lines
 
-    def add(self, index: int, levels: bytes, changes: bytes, values: bytes, message: bytes) -> None:
-        """Component `index`'s freshly rendered lines, one bytes per family; those before it come cached."""
-        if index != self._next:
-            self._copy_cached(index)
-        # Unrolled: this runs for every component rendered, and most have no values or message line.
-        pieces, sizes = self._pieces, self._sizes
-        pieces[0].append(levels)
-        sizes[0] += len(levels)
-        pieces[1].append(changes)
-        sizes[1] += len(changes)
-        if values:
-            pieces[2].append(values)
-            sizes[2] += len(values)
-        if message:
-            pieces[3].append(message)
-            sizes[3] += len(message)
-        self._offsets.extend(sizes)
-        self._next = index + 1
 
-    def finish(self, count: int) -> tuple[Deflated, Deflated, Deflated, Deflated, array[int]]:
-        """The families' lines for `count` components, and where every component's lines start."""
-        self._copy_cached(count)
-        levels, changes, values, messages = (
-            self._deflated(family, b"".join(pieces)) for family, pieces in enumerate(self._pieces)
-        )
-        return levels, changes, values, messages, self._offsets
+def _family_lines(
+    cached: _RobotLines | None,
+    family: int,
+    to_render: list[int],
+    count: int,
+    render_line: Callable[[int], bytes],
+    offsets: array[int],
+) -> Deflated:
+    """A family's lines of `count` components: `to_render` rendered, the others copied from `cached`.
 
-    def _deflated(self, family: int, text: bytes) -> Deflated:
-        """`text` deflated, or the cached piece when that holds the very same text (cheaper to compare)."""
-        # A changed status mostly changes its values alone: its level and level-changes lines, and
-        # so those families of the robot, come out the same bytes.
-        if self._cached is not None:
-            cached = self._cached_families()[family]
-            if cached.size == len(text) and self._cached_text_of(family) == text:
-                return cached
-        return deflate(text)
-
-    def _cached_families(self) -> tuple[Deflated, Deflated, Deflated, Deflated]:
-        assert self._cached is not None
-        cached = self._cached
-        return cached.levels, cached.changes, cached.values, cached.messages
-
-    def _cached_text_of(self, family: int) -> bytes:
-        """A cached family's text, inflated the first time it is needed."""
-        text = self._cached_text[family]
-        if text is None:
-            text = self._cached_text[family] = inflate(self._cached_families()[family])
-        return text
-
-    def _copy_cached(self, stop: int) -> None:
-        """Copy the cached lines of components `self._next` to `stop` (where they had the same index)."""
-        if stop == self._next or self._cached is None:
-            return
-        cached, first, last = self._cached, FAMILIES * self._next, FAMILIES * stop
+    Where each component's lines start (and where the last ends) is appended to `offsets`. A family
+    none of whose lines changed, or whose lines come out the same bytes, is the cached piece itself.
+    """
+    cached_count = len(cached.components) if cached is not None else -1
+    if cached is not None:
+        cached_piece = cached.family(family)
         old = cached.offsets
-        shifts = []
-        for family in range(FAMILIES):
-            text = self._cached_text_of(family)
-            start, end = old[first + family], old[last + family]
-            self._pieces[family].append(text[start:end])
-            shifts.append(self._sizes[family] - start)
-            self._sizes[family] += end - start
-        if any(shifts):
-            self._offsets.extend(
-                [old[i] + shifts[i % FAMILIES] for i in range(first + FAMILIES, last + FAMILIES)]
-            )
+        base = (cached_count + 1) * family
+        if not to_render and count == cached_count:
+            offsets.extend(old[base : base + count + 1])
+            return cached_piece
+    starts: array[int] = array("I")
+    pieces: list[bytes] = []
+    size = following = 0
+    cached_text = b""
+
+    def copy_cached(stop: int) -> None:
+        """Copy the cached lines of components `following` to `stop` (which kept their index)."""
+        nonlocal size, cached_text
+        if not cached_text:
+            cached_text = inflate(cached_piece)
+        start, end = old[base + following], old[base + stop]
+        pieces.append(cached_text[start:end])
+        shift = size - start
+        if shift:
+            starts.extend([offset + shift for offset in old[base + following : base + stop]])
         else:
-            self._offsets.extend(old[first + FAMILIES : last + FAMILIES])
-        self._next = stop
+            starts.extend(old[base + following : base + stop])
+        size += end - start
+
+    for index in to_render:
+        if index != following:
+            copy_cached(index)
+        line = render_line(index)
+        starts.append(size)
+        if line:
+            pieces.append(line)
+            size += len(line)
+        following = index + 1
+    if following != count:
+        copy_cached(count)
+    starts.append(size)
+    offsets.extend(starts)
+    text = b"".join(pieces)
+    # A changed status mostly changes its values alone: when its family still comes out the same
+    # bytes (a value not exported changed), the cached piece is kept (cheaper to compare than compress).
+    if (
+        cached is not None
+        and cached_piece.size == len(text)
+        and (cached_text or inflate(cached_piece)) == text
+    ):
+        return cached_piece
+    return deflate(text)
+
+
+class _ComponentLines:
+    """A robot's components' lines, each family's rendered on demand, for `_family_lines`."""
+
+    def __init__(
+        self,
+        items: list[tuple[ComponentKey, Component]],
+        levels: list[Level],
+        robot_label: str,
+        render: _RenderCache,
+    ) -> None:
+        """Render `items` (the robot's components), now at `levels`, of the robot labelled `robot_label`."""
+        self._items = items
+        self._levels = levels
+        self.robot_label = robot_label
+        self._render = render
+        self._identities: dict[int, str] = {}
+
+    def _identity(self, index: int) -> str:
+        """The component's labels but the robot's."""
+        identity = self._identities.get(index)
+        if identity is None:
+            component = self._items[index][1]
+            escape = self._render.escape
+            identity = f'component="{escape(component.name)}",hardware_id="{escape(component.hardware_id)}"'
+            self._identities[index] = identity
+        return identity
+
+    def level(self, index: int) -> bytes:
+        """Its ros_diagnostics_level line."""
+        labels = f"{self._identity(index)},{self.robot_label}"
+        return f"ros_diagnostics_level{{{labels}}} {_LEVEL_VALUES[self._levels[index]]}\n".encode()
+
+    def changes(self, index: int) -> bytes:
+        """Its ros_diagnostics_level_changes_total line (none when that family is not exported)."""
+        if not self._render.level_changes:
+            return b""
+        labels = f"{self._identity(index)},{self.robot_label}"
+        number = self._render.number(float(self._items[index][1].level_changes))
+        return f"ros_diagnostics_level_changes_total{{{labels}}} {number}\n".encode()
+
+    def values(self, index: int) -> bytes:
+        """Its ros_diagnostics_value lines, one per exported numeric value."""
+        component = self._items[index][1]
+        render = self._render
+        pairs = render.numbers.pairs(component.values)
+        first = next(pairs, None)
+        if first is None:  # most components: no value exported
+            return b""
+        identity, robot_label, escape, number = (
+            self._identity(index),
+            self.robot_label,
+            render.escape,
+            render.number,
+        )
+        return "".join(
+            [
+                f'ros_diagnostics_value{{{identity},key="{escape(key)}",{robot_label}}} {number(value)}\n'
+                for key, value in itertools.chain((first,), pairs)
+            ]
+        ).encode()
+
+    def message(self, index: int) -> bytes:
+        """Its ros_diagnostics_status_message line, or none (MessageLabels)."""
+        message = self._render.message(self._items[index][1])
+        if message is None:
+            return b""
+        return _status_message_line(self._identity(index), self._levels[index], message, self.robot_label)
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
