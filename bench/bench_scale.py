@@ -172,6 +172,10 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
             time.sleep(seconds)
             ours = scrape_durations(prometheus, "overseer", seconds)
             floors = scrape_durations(prometheus, "floor", seconds)
+            # Once the exporter has learned Prometheus's interval (metrics.render_ahead: three scrapes).
+            learned = seconds - 3 * interval
+            ours_learned = scrape_durations(prometheus, "overseer", learned) if learned > 0 else []
+            floors_learned = scrape_durations(prometheus, "floor", learned) if learned > 0 else []
             window = f"{int(seconds)}s"
             attempts = prometheus.query(f'count_over_time(up{{job="overseer"}}[{window}])')
             succeeded = prometheus.query(f'sum_over_time(up{{job="overseer"}}[{window}])')
@@ -194,6 +198,24 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
         Row("scale", "Prometheus: scrape_duration_seconds, exporter (max)", max(ours, default=0.0), "s"),
         Row("scale", "Prometheus: scrape_duration_seconds, floor (median)", floor_median, "s"),
         Row("scale", "Prometheus: exporter / floor", ratio, "x", f"<= {FLOOR_RATIO}", ratio <= FLOOR_RATIO),
+        *(
+            [
+                Row(
+                    "scale",
+                    "Prometheus: exporter / floor, medians after three intervals",
+                    statistics.median(ours_learned) / statistics.median(floors_learned),
+                    "x",
+                ),
+                Row(
+                    "scale",
+                    "Prometheus: scrapes after three intervals, exporter",
+                    len(ours_learned),
+                    "scrapes",
+                ),
+            ]
+            if ours_learned and floors_learned
+            else []
+        ),
         Row("scale", "Prometheus: scrapes measured, exporter / floor", len(ours), f"/ {len(floors)}"),
         Row("scale", "Prometheus: exporter scrapes failed", failed, "scrapes", "0", failed == 0),
         Row("scale", "Prometheus: its CPU since it started", prometheus_cpu, "% of a core"),

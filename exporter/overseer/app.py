@@ -39,6 +39,7 @@ from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
 from overseer.serve.lifecycle import RELOAD_PATH, reload_route
 from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
+from overseer.serve.render_ahead import RenderAhead, RenderAheadCollector
 from overseer.serve.retire_api import RETIREMENTS_PATH, RetireApi
 from overseer.serve.web_config import load_web_config
 from overseer.serve.write_access import WriteAccess
@@ -78,6 +79,7 @@ class Exporter:
     icinga2_push: Icinga2Push | None = None
     silences: AlertmanagerSilences | None = None
     ros2_fleet: FleetDiagnosticsPublisher | None = None
+    render_ahead: RenderAhead | None = None
 
     def __post_init__(self) -> None:
         config = self.config
@@ -116,6 +118,9 @@ class Exporter:
             from overseer.push.ros2_fleet import FleetDiagnosticsPublisher  # rclpy only with --ros2
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
+        if config.metrics.render_ahead:
+            self.render_ahead = RenderAhead(self.fleet.prepare_exposition)
+            extra_collectors.append(RenderAheadCollector(self.render_ahead))
         assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
         access = WriteAccess(config.maintenance.writers, config.web.enable_maintenance_api)
         maintenance_api = MaintenanceApi(self.maintenance, access)
@@ -133,6 +138,7 @@ class Exporter:
             security,
             routes=routes,
             robot_documents=maintenance_api.with_maintenance,
+            on_scrape=None if self.render_ahead is None else self.render_ahead.scraped,
         )
 
     def reload(self) -> str | None:
@@ -166,6 +172,8 @@ class Exporter:
             raise
         self.memory.start(self.fleet)
         threading.Thread(target=self.server.serve_forever, name="http", daemon=True).start()
+        if self.render_ahead is not None:
+            self.render_ahead.start()
         log.info("serving on %s", self.server.url)
         if self.config.dds.enabled or self.config.zenoh.enabled or self.config.ros2.enabled:
             log.info("ROS settings: %s", ros_settings(self.config))
@@ -192,6 +200,8 @@ class Exporter:
         if isinstance(self.fleet, PooledFleet):
             steps.append(("ingest workers", self.fleet.prepare_stop))
         steps += [("HTTP server", self.server.shutdown), ("HTTP socket", self.server.server_close)]
+        if self.render_ahead is not None:
+            steps.append(("render ahead", self.render_ahead.stop))
         if self.icinga2_push is not None:
             steps.append(("Icinga 2 push", self.icinga2_push.stop))
         if self.silences is not None:

@@ -39,6 +39,12 @@ OPTIONS: tuple[Option, ...] = (
         "export ros_diagnostics_level_changes_total, a series per component (true or false)",
         metavar="BOOL",
     ),
+    option(
+        "metrics.render_ahead",
+        "true",
+        "render what changed shortly before each scrape a steady scraper is expected to make (true or false)",
+        metavar="BOOL",
+    ),
 )
 KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
@@ -54,6 +60,8 @@ class MetricsConfig:
     message_label_length: int = DEFAULT_MESSAGE_LABEL_LENGTH
     # ros_diagnostics_level_changes_total, a series per component (flapping); off saves that many.
     level_changes: bool = True
+    # Render what changed shortly before the scrape a steady scraper is expected to make (render_ahead).
+    render_ahead: bool = True
 
     @property
     def value_key_pattern(self) -> re.Pattern[str]:
@@ -76,6 +84,8 @@ def metrics_config(raw: dict[str, Any]) -> MetricsConfig:
         config = replace(config, message_label_length=length)
     if "level_changes" in raw:
         config = replace(config, level_changes=boolean(raw["level_changes"], "metrics.level_changes"))
+    if "render_ahead" in raw:
+        config = replace(config, render_ahead=boolean(raw["render_ahead"], "metrics.render_ahead"))
     if "value_keys" in raw:
         patterns = tuple(
             string(p, "metrics.value_keys") for p in listed(raw["value_keys"], "metrics.value_keys")

@@ -48,6 +48,10 @@ class Fleet(Protocol):
         """Every model's rendered series and counters, for an assembler to write out in a format."""
         ...
 
+    def prepare_exposition(self) -> None:
+        """Render now what changed, so that the next `exposition_parts` has less left to render."""
+        ...
+
     def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
         """GET /api/v1/robots: every robot, or those `query` selects."""
         ...

@@ -111,6 +111,10 @@ class LocalFleet:
         """The model's rendered series and counters."""
         return [self.exposition.render_part()]
 
+    def prepare_exposition(self) -> None:
+        """Render what changed now; the next scrape copies it."""
+        self.exposition.render_part()
+
     def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
         """Every robot's summary, or those `query` selects."""
         return robots_document(self.model.snapshot(), query)

@@ -102,6 +102,10 @@ class PooledFleet:
         totals = self._counters.totals((a.worker, a.generation, part_counters(a.value)) for a in answers)
         return [*(_without_counters(answer.value) for answer in answers), counters_part(totals)]
 
+    def prepare_exposition(self) -> None:
+        """Every worker renders what changed now, at once; the next scrape copies it."""
+        self.pool.ask_all("prepare")
+
     def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
         """Every worker's robots (those `query` selects), by name."""
         return merge_robots_documents([a.value for a in self.pool.ask_all("robots", query)], time.time())

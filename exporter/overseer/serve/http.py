@@ -65,12 +65,14 @@ class OverseerServer(ThreadingHTTPServer):
         security: WebSecurity | None = None,
         routes: Mapping[str, JsonRoute] | None = None,
         robot_documents: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+        on_scrape: Callable[[str], None] | None = None,
     ) -> None:
         """Serve `fleet` on `address` ('' host for every interface; IPv6 when the host has a colon).
 
         `/metrics` is written by `assembler`; `routes` are JSON paths of other outputs (the events, the
         maintenance windows), each answering its path and those below it; `robot_documents` adds to the
-        robots' documents what other outputs know of them (their maintenance).
+        robots' documents what other outputs know of them (their maintenance); `on_scrape` hears of every
+        `/metrics` request as it begins, by its client's address and user agent (`render_ahead`).
         """
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
@@ -78,6 +80,7 @@ class OverseerServer(ThreadingHTTPServer):
         self.assembler = assembler
         self.routes = dict(routes or {})
         self.robot_documents = robot_documents or (lambda document: document)
+        self.on_scrape = on_scrape or (lambda scraper: None)
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -352,6 +355,7 @@ class _Handler(BaseHTTPRequestHandler):
         self._json(200, self.server.fleet.components_document(query), head_only)
 
     def _metrics(self, head_only: bool) -> None:
+        self.server.on_scrape(f"{self.client_address[0]} {self.headers.get('User-Agent', '')}")
         fmt = negotiate_format(self.headers.get("Accept"))
         parts = self.server.fleet.exposition_parts()
         if accepts_gzip(self.headers.get("Accept-Encoding")):

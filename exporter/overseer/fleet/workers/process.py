@@ -47,6 +47,9 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
     if kind == "part":
         [part] = fleet.exposition_parts()
         return part
+    if kind == "prepare":
+        fleet.prepare_exposition()
+        return None
     if kind == "robots":
         return fleet.robots_document(argument)
     if kind == "robot":

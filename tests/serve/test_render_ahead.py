@@ -1,0 +1,142 @@
+"""The series are rendered shortly before the scrape a steady scraper is expected to make.
+
+Unit tests drive the cadence through given times and the thread through real ones (short intervals);
+the last test has Debian's Prometheus scrape an exporter with two ingest workers and a simulated fleet,
+and reads from Prometheus that the exporter rendered ahead of its scrapes.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from overseer.serve.render_ahead import MAX_SCRAPERS, RenderAhead, ScrapeCadence
+from testbed.ports import fresh_domain_id
+from testbed.processes import running_exporter, running_simulator, wait_for
+from testbed.prometheus import running_prometheus
+
+PROMETHEUS = "127.0.0.1 Prometheus/2.42.0"
+
+
+def cadence_of(scraper: str, *times: float, min_interval: float = 5.0) -> ScrapeCadence:
+    cadence = ScrapeCadence(min_interval)
+    for moment in times:
+        cadence.scraped(scraper, moment)
+    return cadence
+
+
+def test_a_scraper_at_a_steady_interval_is_expected_one_interval_after_its_last_scrape() -> None:
+    cadence = cadence_of(PROMETHEUS, 100.0, 160.0, 220.02)
+    assert cadence.next_scrape(221.0, float("-inf")) == pytest.approx((280.04, 60.02))
+    # Already rendered ahead for that scrape: nothing more is expected until it comes.
+    assert cadence.next_scrape(275.0, 280.04) is None
+
+
+def test_one_gap_or_unsteady_gaps_make_no_interval() -> None:
+    assert cadence_of(PROMETHEUS, 100.0, 160.0).next_scrape(161.0, float("-inf")) is None
+    assert cadence_of(PROMETHEUS, 100.0, 160.0, 190.0).next_scrape(191.0, float("-inf")) is None
+    # A person's curl now and then does not count either.
+    assert cadence_of("127.0.0.1 curl/7.88", 0.0, 40.0, 140.0).next_scrape(141.0, float("-inf")) is None
+
+
+def test_intervals_below_the_minimum_are_not_rendered_ahead() -> None:
+    assert cadence_of(PROMETHEUS, 0.0, 1.0, 2.0).next_scrape(2.5, float("-inf")) is None
+    assert cadence_of(PROMETHEUS, 0.0, 1.0, 2.0, min_interval=1.0).next_scrape(2.5, float("-inf")) == (
+        3.0,
+        1.0,
+    )
+
+
+def test_a_scraper_that_stopped_is_not_expected_again() -> None:
+    cadence = cadence_of(PROMETHEUS, 0.0, 10.0, 20.0)
+    assert cadence.next_scrape(24.0, float("-inf")) == (30.0, 10.0)
+    assert cadence.next_scrape(34.0, float("-inf")) == (30.0, 10.0)  # late: rendered at once
+    assert cadence.next_scrape(36.0, float("-inf")) is None  # half an interval late: stopped
+
+
+def test_the_earliest_of_several_scrapers_comes_first() -> None:
+    cadence = cadence_of("10.0.0.1 Prometheus/2.42.0", 0.0, 60.0, 120.0)
+    for moment in (-25.0, 35.0, 95.0):  # a second Prometheus (a pair), at another offset
+        cadence.scraped("10.0.0.2 Prometheus/2.42.0", moment)
+    assert cadence.next_scrape(121.0, float("-inf")) == (155.0, 60.0)
+    assert cadence.next_scrape(121.0, 155.0) == (180.0, 60.0)
+
+
+def test_the_scrapers_followed_are_bounded_and_the_least_recent_forgotten() -> None:
+    cadence = cadence_of(PROMETHEUS, 0.0, 10.0, 20.0)
+    for client in range(MAX_SCRAPERS):
+        cadence.scraped(f"10.0.0.{client} curl", 21.0)
+    assert cadence.next_scrape(22.0, float("-inf")) is None
+    assert len(cadence._scrapers) == MAX_SCRAPERS
+
+
+def test_the_thread_renders_once_shortly_before_each_expected_scrape() -> None:
+    rendered: list[float] = []
+    render_ahead = RenderAhead(lambda: rendered.append(time.monotonic()), min_interval=0.2)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        for scrape in range(3):  # every 0.6 s: learned at the third
+            time.sleep(max(0.0, started + 0.6 * scrape - time.monotonic()))
+            render_ahead.scraped(PROMETHEUS)
+        time.sleep(max(0.0, started + 1.8 - time.monotonic()))
+        before_the_fourth = list(rendered)
+        render_ahead.scraped(PROMETHEUS)
+    finally:
+        render_ahead.stop()
+    # Half an interval (0.3 s) at most before the scrape expected at 1.8 s, and only once.
+    assert len(before_the_fourth) == 1
+    assert 1.2 + 0.25 <= before_the_fourth[0] - started <= 1.8
+    assert render_ahead.renders == 1 and render_ahead.failures == 0
+
+
+def test_a_render_that_fails_is_counted_and_the_thread_goes_on() -> None:
+    calls: list[float] = []
+    done = threading.Event()
+
+    def failing() -> None:
+        calls.append(time.monotonic())
+        if len(calls) == 2:
+            done.set()
+        raise RuntimeError("a worker is restarting")
+
+    render_ahead = RenderAhead(failing, min_interval=0.1)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        for scrape in range(5):
+            time.sleep(max(0.0, started + 0.3 * scrape - time.monotonic()))
+            render_ahead.scraped(PROMETHEUS)
+        assert done.wait(2.0)
+    finally:
+        render_ahead.stop()
+    assert render_ahead.failures >= 2 and render_ahead.renders == 0
+
+
+def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp_path: Path) -> None:
+    domain = fresh_domain_id()
+    with (
+        running_simulator(tmp_path, domain, "--robots=4", "--rate=2"),
+        running_exporter(tmp_path, domain, "--ingest.workers=2") as exporter,
+    ):
+        target = exporter.url.removeprefix("http://")
+        config = {
+            "global": {"scrape_interval": "5s", "scrape_timeout": "4s"},
+            "scrape_configs": [{"job_name": "overseer", "static_configs": [{"targets": [target]}]}],
+        }
+        with running_prometheus(tmp_path, config) as prometheus:
+
+            def renders_ahead() -> dict[str, float]:
+                found = prometheus.query("overseer_exposition_renders_ahead_total")
+                return {sample["metric"]["result"]: float(sample["value"][1]) for sample in found}
+
+            # Learned at the third scrape (10 s), rendered before the fourth, seen by the fifth.
+            counts = wait_for(lambda: (c := renders_ahead()).get("done", 0) >= 2 and c, 45, 1.0)
+            assert counts["failed"] == 0
+            seconds = prometheus.query("overseer_exposition_render_ahead_seconds")
+            assert 0 < float(seconds[0]["value"][1]) < 4
+            robots = prometheus.query("count(ros_diagnostics_robot_up == 1)")
+            assert robots and float(robots[0]["value"][1]) == 4
