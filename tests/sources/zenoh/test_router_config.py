@@ -25,18 +25,23 @@ def value(config: zenoh.Config, key: str) -> object:
     return json.loads(config.get_json(key))
 
 
+def shipped() -> zenoh.Config:
+    """`deploy/zenoh/router.json5`, as Zenoh reads it."""
+    return zenoh.Config.from_file(str(SHIPPED_CONFIG))
+
+
 def test_the_shipped_router_configuration_is_a_router_with_a_longer_data_queue_than_zenohs_default() -> None:
-    shipped = zenoh.Config.from_file(str(SHIPPED_CONFIG))
-    assert value(shipped, "mode") == "router"
-    assert value(shipped, "scouting/multicast/enabled") is False
-    assert value(shipped, DATA_QUEUE) == 16  # Zenoh's most
-    assert value(shipped, DATA_QUEUE) > value(zenoh.Config(), DATA_QUEUE)  # type: ignore[operator]
+    config = shipped()
+    assert value(config, "mode") == "router"
+    assert value(config, "scouting/multicast/enabled") is False
+    assert value(config, DATA_QUEUE) == 16  # Zenoh's most
+    assert value(config, DATA_QUEUE) > value(zenoh.Config(), DATA_QUEUE)  # type: ignore[operator]
 
 
 def test_the_tests_router_runs_with_the_shipped_configuration_unless_told_zenohs_defaults() -> None:
-    shipped = router_config(7447)
-    assert value(shipped, DATA_QUEUE) == value(zenoh.Config.from_file(str(SHIPPED_CONFIG)), DATA_QUEUE)
-    assert value(shipped, "listen/endpoints") == ["tcp/127.0.0.1:7447"]
+    tests_router = router_config(7447)
+    assert value(tests_router, DATA_QUEUE) == value(shipped(), DATA_QUEUE)
+    assert value(tests_router, "listen/endpoints") == ["tcp/127.0.0.1:7447"]
     defaults = router_config(7447, zenoh_defaults=True)
     assert value(defaults, DATA_QUEUE) == value(zenoh.Config(), DATA_QUEUE)
     assert value(defaults, "mode") == "router"
@@ -48,4 +53,4 @@ def test_the_routers_networks_md_shows_are_zenoh_configurations_with_the_shipped
     assert len(routers) == 2  # the central router and a site's
     for block in routers:
         config = zenoh.Config.from_json5(block)
-        assert value(config, DATA_QUEUE) == value(zenoh.Config.from_file(str(SHIPPED_CONFIG)), DATA_QUEUE)
+        assert value(config, DATA_QUEUE) == value(shipped(), DATA_QUEUE)
