@@ -81,6 +81,8 @@ class Counts(NamedTuple):
     lost: float  # samples its robots published that it says it never heard (Zenoh's sequence numbers)
     events_written: float
     events_dropped: float
+    renders_ahead: float  # of the series, shortly before a scrape expected (metrics.render_ahead)
+    render_ahead_seconds: float  # how long the last took
 
 
 def counted(url: str, transport: str) -> Counts:
@@ -99,6 +101,8 @@ def counted(url: str, transport: str) -> Counts:
         messages("lost"),
         total("overseer_events_written_total"),
         total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
+        total(r'overseer_exposition_renders_ahead_total\{result="done"\}'),
+        total("overseer_exposition_render_ahead_seconds"),
     )
 
 
@@ -455,6 +459,19 @@ def run(
             "events",
             "0",
             counts.events_dropped == 0,
+        ),
+        *(
+            [
+                Row(
+                    "scale",
+                    f"{label}: renders ahead of Prometheus's scrapes",
+                    counts.renders_ahead,
+                    "renders",
+                ),
+                Row("scale", f"{label}: the last render ahead took", counts.render_ahead_seconds, "s"),
+            ]
+            if prometheus_seconds
+            else []
         ),
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
