@@ -219,6 +219,12 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
             fleet.snapshot()
         wait_for(lambda: pool.restarts[1] == 3 and pool.up(1), 20, message="restarted a third time")
         assert fleet.snapshot().robots == ()
+        fleet.prepare_exposition()  # every worker renders ahead of a scrape
+        # A render ahead of a scrape that a worker could not do is a failure (counted), not done.
+        os.kill(pool.pid(1) or 0, signal.SIGSTOP)
+        with pytest.raises(WorkersUnavailable, match=r"ingest worker \[1\] did not answer"):
+            fleet.prepare_exposition()
+        wait_for(lambda: pool.restarts[1] == 4 and pool.up(1), 20, message="restarted a fourth time")
     finally:
         fleet.stop()
 

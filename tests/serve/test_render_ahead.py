@@ -44,6 +44,10 @@ def test_one_gap_or_unsteady_gaps_make_no_interval() -> None:
 
 def test_intervals_below_the_minimum_are_not_rendered_ahead() -> None:
     assert cadence_of(PROMETHEUS, 0.0, 1.0, 2.0).next_scrape(2.5, float("-inf")) is None
+    # At the minimum itself, a scrape a little early still counts.
+    assert cadence_of(PROMETHEUS, 0.0, 5.0, 9.9995).next_scrape(10.0, float("-inf")) == pytest.approx(
+        (14.999, 4.9995)
+    )
     assert cadence_of(PROMETHEUS, 0.0, 1.0, 2.0, min_interval=1.0).next_scrape(2.5, float("-inf")) == (
         3.0,
         1.0,
@@ -75,21 +79,21 @@ def test_the_scrapers_followed_are_bounded_and_the_least_recent_forgotten() -> N
 
 def test_the_thread_renders_once_shortly_before_each_expected_scrape() -> None:
     rendered: list[float] = []
-    render_ahead = RenderAhead(lambda: rendered.append(time.monotonic()), min_interval=0.2)
+    render_ahead = RenderAhead(lambda: rendered.append(time.monotonic()), min_interval=1.0)
     render_ahead.start()
     try:
         started = time.monotonic()
-        for scrape in range(3):  # every 0.6 s: learned at the third
-            time.sleep(max(0.0, started + 0.6 * scrape - time.monotonic()))
+        for scrape in range(3):  # every 1.5 s: learned at the third
+            time.sleep(max(0.0, started + 1.5 * scrape - time.monotonic()))
             render_ahead.scraped(PROMETHEUS)
-        time.sleep(max(0.0, started + 1.8 - time.monotonic()))
+        time.sleep(max(0.0, started + 4.5 - time.monotonic()))
         before_the_fourth = list(rendered)
         render_ahead.scraped(PROMETHEUS)
     finally:
         render_ahead.stop()
-    # Half an interval (0.3 s) at most before the scrape expected at 1.8 s, and only once.
+    # Half a second (the margin) before the scrape expected at 4.5 s, and only once.
     assert len(before_the_fourth) == 1
-    assert 1.2 + 0.25 <= before_the_fourth[0] - started <= 1.8
+    assert 3.0 + 0.5 <= before_the_fourth[0] - started <= 4.5
     assert render_ahead.renders == 1 and render_ahead.failures == 0
 
 
@@ -103,19 +107,20 @@ def test_a_render_that_fails_is_counted_and_the_thread_goes_on() -> None:
             done.set()
         raise RuntimeError("a worker is restarting")
 
-    render_ahead = RenderAhead(failing, min_interval=0.1)
+    render_ahead = RenderAhead(failing, min_interval=0.5)
     render_ahead.start()
     try:
         started = time.monotonic()
-        for scrape in range(5):
-            time.sleep(max(0.0, started + 0.3 * scrape - time.monotonic()))
+        for scrape in range(5):  # every second: learned at the third, renders before the fourth and fifth
+            time.sleep(max(0.0, started + scrape - time.monotonic()))
             render_ahead.scraped(PROMETHEUS)
-        assert done.wait(2.0)
+        assert done.wait(3.0)
     finally:
         render_ahead.stop()
     assert render_ahead.failures >= 2 and render_ahead.renders == 0
 
 
+@pytest.mark.servers
 def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp_path: Path) -> None:
     domain = fresh_domain_id()
     with (
@@ -134,7 +139,7 @@ def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp
                 return {sample["metric"]["result"]: float(sample["value"][1]) for sample in found}
 
             # Learned at the third scrape (10 s), rendered before the fourth, seen by the fifth.
-            counts = wait_for(lambda: (c := renders_ahead()).get("done", 0) >= 2 and c, 45, 1.0)
+            counts = wait_for(lambda: (c := renders_ahead()).get("done", 0) >= 2 and c, 60, 1.0)
             assert counts["failed"] == 0
             seconds = prometheus.query("overseer_exposition_render_ahead_seconds")
             assert 0 < float(seconds[0]["value"][1]) < 4

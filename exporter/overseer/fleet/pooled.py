@@ -103,8 +103,8 @@ class PooledFleet:
         return [*(_without_counters(answer.value) for answer in answers), counters_part(totals)]
 
     def prepare_exposition(self) -> None:
-        """Every worker renders what changed now, at once; the next scrape copies it."""
-        self.pool.ask_all("prepare")
+        """Every worker renders what changed now, at once; `WorkersUnavailable` when one could not."""
+        self.pool.ask_every("prepare")
 
     def robots_document(self, query: RobotQuery | None = None) -> dict[str, Any]:
         """Every worker's robots (those `query` selects), by name."""

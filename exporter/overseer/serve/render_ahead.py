@@ -55,7 +55,9 @@ class ScrapeCadence:
             return
         gap = now - known.last
         steady = known.gap is not None and abs(gap - known.gap) <= STEADY * known.gap
-        self._scrapers[scraper] = _Scraper(now, gap, gap if steady and gap >= self._min_interval else None)
+        # A scraper at the minimum itself asks a fraction of a millisecond early as often as late.
+        long_enough = gap >= self._min_interval * (1 - STEADY)
+        self._scrapers[scraper] = _Scraper(now, gap, gap if steady and long_enough else None)
 
     def next_scrape(self, now: float, after: float) -> tuple[float, float] | None:
         """The earliest scrape expected later than `after`, and that scraper's interval; None for none.
@@ -117,7 +119,9 @@ class RenderAhead:
         while not self._stopping.is_set():
             now = self._clock()
             with self._lock:
-                expected = self._cadence.next_scrape(now, rendered_for)
+                # A scrape expected within a render's time of the last one (a pair of Prometheus
+                # servers at nearly the same offset) finds that render still fresh: none of its own.
+                expected = self._cadence.next_scrape(now, rendered_for + self.last_seconds + MARGIN)
             if expected is None:
                 self._sleep(None)
                 continue
