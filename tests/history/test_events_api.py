@@ -16,6 +16,7 @@ import pytest
 from overseer.app import Exporter
 from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
+from overseer.serve.render_ahead import RenderAheadCollector
 from overseer.sources import enabled_transports
 from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
 from testbed.in_process import call, in_process_exporter, publish
@@ -160,7 +161,9 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
         assert running.model is not None and running.history is not None
         oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
         maintenance = MaintenanceCollector(running.maintenance, running.robot_names)
-        registry = oracle_registry(oracle, running.history.collector, maintenance)
+        assert running.render_ahead is not None  # on by default: its metrics come last
+        render_ahead = RenderAheadCollector(running.render_ahead)
+        registry = oracle_registry(oracle, running.history.collector, maintenance, render_ahead)
         assembler, fleet = running.server.assembler, running.fleet
         for fmt in (TEXT, OPENMETRICS):
             fast = assembler.assemble(fleet.exposition_parts(), fmt)
