@@ -11,7 +11,6 @@ prometheus-client's rendering of the same fleet.
 
 from __future__ import annotations
 
-import itertools
 import re
 import threading
 from array import array
@@ -281,8 +280,8 @@ def _family_lines(
     Where each component's lines start (and where the last ends) is appended to `offsets`. A family
     none of whose lines changed, or whose lines come out the same bytes, is the cached piece itself.
     """
-    cached_count = len(cached.components) if cached is not None else -1
     if cached is not None:
+        cached_count = len(cached.components)
         cached_piece = cached.family(family)
         old = cached.offsets
         base = (cached_count + 1) * family
@@ -377,9 +376,8 @@ class _ComponentLines:
         """Its ros_diagnostics_value lines, one per exported numeric value."""
         component = self._items[index][1]
         render = self._render
-        pairs = render.numbers.pairs(component.values)
-        first = next(pairs, None)
-        if first is None:  # most components: no value exported
+        pairs = list(render.numbers.pairs(component.values))
+        if not pairs:  # most components: no value exported
             return b""
         identity, robot_label, escape, number = (
             self._identity(index),
@@ -390,7 +388,7 @@ class _ComponentLines:
         return "".join(
             [
                 f'ros_diagnostics_value{{{identity},key="{escape(key)}",{robot_label}}} {number(value)}\n'
-                for key, value in itertools.chain((first,), pairs)
+                for key, value in pairs
             ]
         ).encode()
 
