@@ -16,6 +16,7 @@ const MATCH_LIMIT = 200;
 const SEARCH_DELAY_MS = 250;
 
 const openGroups = new Map();  // fleet groups the user opened or closed, by grouping and group
+const listedRows = new Map();  // rows the user asked a fleet group to list, by grouping and group
 const openFolders = new Map();  // robot name → its folders the user opened or closed, by path
 let view = readQuery(location.search);
 let timeline = null;
@@ -73,7 +74,7 @@ async function renderFleet(current) {
     ? new Set(robots.robots.filter((r) => hasLabels(r, current.labels)).map((r) => r.robot)) : null;
   renderSummary(robots, current, toggleLevel);
   renderLabelControls(robots.robots, current, groupBy, filterLabel);
-  renderRobots(robots, current, matched, openGroups, openRobot);
+  renderRobots(robots, current, matched, {openGroups, listedRows}, openRobot, refresh);
   renderMatches(matches, current, labelled, openRobot);
   document.getElementById("fleet-view").hidden = false;
   document.getElementById("robot-view").hidden = true;

@@ -8,6 +8,12 @@ import {MAINTENANCE, shownState} from "./maintenance.js";
 
 const collator = new Intl.Collator(undefined, {numeric: true});
 const NO_NAMESPACE = "";
+// A large fleet's page lists a bounded number of rows, so that its first render and every refresh
+// build a few hundred table rows, not one per robot: the counts above and in each group's header still
+// cover every robot, the sort decides which come first, and each group lists more on request.
+export const GROUP_ROWS = 100;  // rows a group lists at first
+export const PAGE_ROWS = 500;  // rows the groups list at first together, in their order
+export const MORE_ROWS = 500;  // rows "list more" adds
 
 /** The group a robot belongs to: the first segment of a namespaced name ("site2/robot7" → "site2"). */
 export function namespaceOf(name) {
@@ -104,33 +110,61 @@ export function renderSummary(robotsDocument, view, onToggleLevel) {
       `${componentTotal} components: ${STATES.map((s) => `${components[s]} ${s}`).join(", ")}`));
 }
 
-/** The robots, grouped, as the filter and sort of `view` ask; `openGroups` keeps the user's choices. */
-export function renderRobots(robotsDocument, view, matchedRobots, openGroups, onOpenRobot) {
+/** The robots, grouped, as the filter and sort of `view` ask; `openGroups` keeps the user's choices of
+ * open groups, `listedRows` the rows they asked each group to list (`onListMore` renders again). */
+export function renderRobots(robotsDocument, view, matchedRobots, {openGroups, listedRows}, onOpenRobot, onListMore) {
   const now = robotsDocument.generated_at;
   const shown = visibleRobots(robotsDocument.robots, view, matchedRobots);
-  document.getElementById("showing").textContent =
-    `Showing ${shown.length} of ${robotsDocument.robots.length} robots`;
   const labelled = robotsDocument.robots.some((robot) => Object.keys(robot.labels || {}).length > 0);
   const headings = ["Level", "Robot", ...(labelled ? ["Labels"] : []), "Components", "Last message"];
   const sections = [];
+  let budget = PAGE_ROWS;
+  let listedTotal = 0;
   for (const [name, robots] of groupRobots(shown, view.group, view.sort === "name")) {
     const key = `${view.group ?? ""}\u0000${name}`;
     const judged = robots.filter((r) => !r.maintenance);
     const worst = judged.length ? worstState(judged.map((r) => r.state)) : MAINTENANCE;
     const perState = [...STATES, MAINTENANCE].map((s) => [s, robots.filter((r) => shownState(r) === s).length])
       .filter(([, n]) => n);
+    const listed = Math.min(robots.length, listedRows.get(key) ?? Math.min(GROUP_ROWS, budget));
+    budget = Math.max(0, budget - listed);
+    listedTotal += listed;
+    const listMore = (count) => {
+      listedRows.set(key, count);
+      onListMore();
+    };
     const details = element("details", {class: "group", "data-group": name, open: openGroups.get(key) ?? true},
       element("summary", {},
         badge(worst), " ",
         element("span", {class: "group-name"}, groupTitle(name, view.group)),
         element("small", {}, `${robots.length} robots: ${perState.map(([s, n]) => `${n} ${s}`).join(", ")}`)),
-      element("table", {class: "robots"},
+      listed > 0 ? element("table", {class: "robots"},
         element("thead", {}, element("tr", {}, ...headings.map((h) => element("th", {}, h)))),
-        element("tbody", {}, ...robots.map((robot) => robotRow(robot, now, labelled, onOpenRobot)))));
+        element("tbody", {}, ...robots.slice(0, listed).map((robot) => robotRow(robot, now, labelled, onOpenRobot))))
+        : null,
+      listed < robots.length ? moreRows(listed, robots.length, view.sort, listMore) : null);
     details.firstChild.addEventListener("click", () => openGroups.set(key, !details.open));
     sections.push(details);
   }
+  const unlisted = listedTotal < shown.length ? `, ${listedTotal} listed` : "";
+  document.getElementById("showing").textContent =
+    `Showing ${shown.length} of ${robotsDocument.robots.length} robots${unlisted}`;
   document.getElementById("groups").replaceChildren(...sections);
+}
+
+/** Below a group that lists `listed` of its `total` robots: how many are not listed, and buttons that list more. */
+function moreRows(listed, total, sort, listMore) {
+  const button = (text, count) => {
+    const node = element("button", {type: "button", "data-list": String(count)}, text);
+    node.addEventListener("click", () => listMore(count));
+    return node;
+  };
+  const order = sort === "name" ? "by name" : "the sort's first";
+  const next = Math.min(total, listed + MORE_ROWS);
+  return element("p", {class: "more-rows"},
+    `${total - listed} more robots not listed (${listed} listed, ${order}) `,
+    next < total ? button(`list ${next - listed} more`, next) : null, " ",
+    button(`list all ${total}`, total));
 }
 
 function robotRow(robot, now, labelled, onOpenRobot) {

@@ -1,0 +1,110 @@
+"""The status page of a large fleet in a real headless Chromium: a bounded number of rows, more on request.
+
+The model is filled in this process through the real ingest (CDR payloads into `PayloadIngest`) and served
+by the real HTTP server: 720 robots in six namespaces of 120, one robot of each namespace in ERROR and
+named last, so that only the sort by level lists it first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from playwright.sync_api import Browser, Page, expect
+
+from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
+from overseer.ingest.payload import PayloadIngest
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.serve.http import OverseerServer
+from testbed.browser import error_free_page, expect_failed_request, open_page, wait_for_refresh
+from testbed.model_server import serving
+
+pytestmark = pytest.mark.servers  # a real HTTP server and Chromium
+
+GROUPS = 6
+PER_GROUP = 120
+# What the page lists at first (serve/status_page/fleet.js): 100 rows a group, 500 on the page.
+GROUP_ROWS = 100
+PAGE_ROWS = 500
+
+
+def robot_name(group: int, index: int) -> str:
+    return f"g{group}/r{index:03d}"
+
+
+@pytest.fixture(scope="module")
+def server() -> Iterator[OverseerServer]:
+    model = FleetModel(FleetLimits(max_robots=10_000, stale_after=3600, robot_timeout=3600))
+    for group in range(GROUPS):
+        for index in range(PER_GROUP):
+            name = robot_name(group, index)
+            level = 2 if index == PER_GROUP - 1 else 0
+            array = DiagnosticArray(0, 0, "", (DiagnosticStatus(level, "/Laser", "scans", "", ()),))
+            PayloadIngest(model, name, "dds", f"rt/{name}/diagnostics_agg", WIRE_FORMAT)(
+                encode_diagnostic_array(array)
+            )
+    with serving(model) as server:
+        yield server
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Page]:
+    with error_free_page(browser) as page:
+        expect_failed_request(page, "/api/v1/maintenance")  # this server has no maintenance API: 404
+        yield page
+
+
+def listed_per_group(page: Page) -> dict[str, int]:
+    counts: dict[str, int] = page.locator("details.group").evaluate_all(
+        "groups => Object.fromEntries(groups.map("
+        "g => [g.dataset.group, g.querySelectorAll('tr[data-robot]').length]))"
+    )
+    return counts
+
+
+def test_a_large_fleet_lists_a_bounded_number_of_rows_and_counts_every_robot(
+    page: Page, server: OverseerServer
+) -> None:
+    open_page(page, server.url + "/")
+    assert listed_per_group(page) == {
+        f"g{g}": GROUP_ROWS if g < PAGE_ROWS // GROUP_ROWS else 0 for g in range(6)
+    }
+    total = GROUPS * PER_GROUP
+    expect(page.locator("#showing")).to_have_text(f"Showing {total} of {total} robots, {PAGE_ROWS} listed")
+    expect(page.locator('[data-total="robots"]')).to_have_text(f"{total} robots")
+    expect(page.locator('[data-total="ERROR"]')).to_have_text(str(GROUPS))
+    expect(page.locator('details.group[data-group="g0"] > summary small')).to_have_text(
+        f"{PER_GROUP} robots: 1 ERROR, {PER_GROUP - 1} OK"
+    )
+    expect(page.locator('details.group[data-group="g0"] .more-rows')).to_contain_text(
+        f"{PER_GROUP - GROUP_ROWS} more robots not listed"
+    )
+    expect(page.locator('details.group[data-group="g5"] .more-rows')).to_contain_text(
+        f"{PER_GROUP} more robots not listed"
+    )
+
+
+def test_the_sort_decides_which_robots_are_listed_first(page: Page, server: OverseerServer) -> None:
+    open_page(page, server.url + "/")
+    first = page.locator('details.group[data-group="g0"] tr[data-robot]').first
+    expect(first).to_have_attribute("data-robot", robot_name(0, 0))
+    open_page(page, server.url + "/?sort=level")
+    expect(first).to_have_attribute("data-robot", robot_name(0, PER_GROUP - 1))
+    expect(first).to_have_attribute("data-state", "ERROR")
+
+
+def test_list_all_lists_the_rest_of_a_group_and_a_refresh_keeps_it(
+    page: Page, server: OverseerServer
+) -> None:
+    open_page(page, server.url + "/")
+    page.click(f'details.group[data-group="g5"] .more-rows button[data-list="{PER_GROUP}"]')
+    expect(page.locator('details.group[data-group="g5"] tr[data-robot]')).to_have_count(PER_GROUP)
+    expect(page.locator('details.group[data-group="g5"] .more-rows')).to_have_count(0)
+    wait_for_refresh(page)
+    assert listed_per_group(page)["g5"] == PER_GROUP
+    assert listed_per_group(page)["g0"] == GROUP_ROWS
+    listed = PAGE_ROWS + PER_GROUP
+    expect(page.locator("#showing")).to_have_text(
+        f"Showing {GROUPS * PER_GROUP} of {GROUPS * PER_GROUP} robots, {listed} listed"
+    )
