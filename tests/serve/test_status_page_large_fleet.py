@@ -7,10 +7,12 @@ named last, so that only the sort by level lists it first.
 
 from __future__ import annotations
 
+import itertools
+import time
 from collections.abc import Iterator
 
 import pytest
-from playwright.sync_api import Browser, Page, expect
+from playwright.sync_api import Browser, Page, Route, expect
 
 from overseer.codec.cdr import WIRE_FORMAT, encode_diagnostic_array
 from overseer.ingest.payload import PayloadIngest
@@ -108,3 +110,20 @@ def test_list_all_lists_the_rest_of_a_group_and_a_refresh_keeps_it(
     expect(page.locator("#showing")).to_have_text(
         f"Showing {GROUPS * PER_GROUP} of {GROUPS * PER_GROUP} robots, {listed} listed"
     )
+
+
+def test_a_page_whose_reads_take_long_refreshes_less_often(page: Page, server: OverseerServer) -> None:
+    """Reads of the fleet made to take a second (the test holds each request): the page waits 4 s more."""
+    starts: list[float] = []
+
+    def slowly(route: Route) -> None:
+        starts.append(time.monotonic())
+        time.sleep(1.0)
+        route.continue_()
+
+    page.route("**/api/v1/robots", slowly)
+    open_page(page, server.url + "/")
+    page.wait_for_timeout(11_000)
+    gaps = [later - earlier for earlier, later in itertools.pairwise(starts)]
+    assert len(gaps) >= 1, starts
+    assert min(gaps) >= 4.5, gaps  # a second's read, then four times as long; 2 s apart when reads are quick

@@ -12,6 +12,9 @@ import {Timeline} from "./timeline.js";
 import {buildTree, renderTree} from "./tree.js";
 
 const REFRESH_MS = 2000;
+// A refresh that took long (a large fleet's answers on a busy exporter) waits this many times as long
+// before the next: an open page takes at most a fifth of the time of the exporter's reads.
+const REFRESH_BACKOFF = 4;
 const MATCH_LIMIT = 200;
 const SEARCH_DELAY_MS = 250;
 
@@ -23,6 +26,7 @@ let timeline = null;
 let timer = null;
 let generation = 0;  // a render started for an older view is dropped
 let rendered = false;
+let counting = null;  // the robot view's read of the fleet's counts, while under way
 
 function setView(next, how) {
   view = next;
@@ -90,8 +94,9 @@ async function renderRobot(current) {
     timeline = new Timeline(current.robot, current.component);
   }
   const path = `api/v1/robots/${current.robot.split("/").map(encodeURIComponent).join("/")}`;
-  // the fleet's counts at the top come when they come: the robot's own view does not wait for them
-  getJson("api/v1/robots").then((robots) => {
+  // the fleet's counts at the top come when they come: the robot's own view does not wait for them (the
+  // next refresh does)
+  counting = getJson("api/v1/robots").then((robots) => {
     if (current === view) renderSummary(robots, {...current, levels: new Set()}, toggleLevel);
   }, () => {});
   const [robot, maintenance] = await Promise.all([
@@ -168,6 +173,7 @@ async function refresh() {
   clearTimeout(timer);
   const mine = ++generation;
   const current = view;
+  const started = performance.now();
   try {
     const done = current.robot !== null ? await renderRobot(current) : await renderFleet(current);
     if (done && mine === generation) {
@@ -183,7 +189,9 @@ async function refresh() {
   } catch (error) {
     if (mine === generation) showError(`cannot reach the exporter: ${error.message}`);
   }
-  if (mine === generation) timer = setTimeout(refresh, REFRESH_MS);
+  if (counting !== null) await counting;
+  const took = performance.now() - started;
+  if (mine === generation) timer = setTimeout(refresh, Math.max(REFRESH_MS, REFRESH_BACKOFF * took));
 }
 
 function setUpControls() {
