@@ -11,9 +11,9 @@ const NO_NAMESPACE = "";
 // A large fleet's page lists a bounded number of rows, so that its first render and every refresh
 // build a few hundred table rows, not one per robot: the counts above and in each group's header still
 // cover every robot, the sort decides which come first, and each group lists more on request.
-export const GROUP_ROWS = 100;  // rows a group lists at first
-export const PAGE_ROWS = 500;  // rows the groups list at first together, in their order
-export const MORE_ROWS = 500;  // rows "list more" adds
+const GROUP_ROWS = 100;  // rows a group lists at first
+const PAGE_ROWS = 500;  // rows the groups list at first together, in their order
+const MORE_ROWS = 500;  // rows "list more" adds
 
 /** The group a robot belongs to: the first segment of a namespaced name ("site2/robot7" → "site2"). */
 export function namespaceOf(name) {
