@@ -83,33 +83,53 @@ def test_a_large_fleet_lists_a_bounded_number_of_rows_and_counts_every_robot(
         f"{PER_GROUP - GROUP_ROWS} more robots not listed"
     )
     expect(page.locator('details.group[data-group="g5"] .more-rows')).to_contain_text(
-        f"{PER_GROUP} more robots not listed"
+        f"{PER_GROUP} robots not listed"
+    )
+    expect(page.locator('details.group[data-group="g5"] .more-rows button')).to_have_attribute(
+        "aria-label", f"list all {PER_GROUP} robots of g5/"
     )
 
 
-def test_the_sort_decides_which_robots_are_listed_first(page: Page, server: OverseerServer) -> None:
+def test_the_sort_decides_which_robots_are_listed(page: Page, server: OverseerServer) -> None:
+    in_trouble = robot_name(0, PER_GROUP - 1)  # last by name, first by level
     open_page(page, server.url + "/")
-    first = page.locator('details.group[data-group="g0"] tr[data-robot]').first
-    expect(first).to_have_attribute("data-robot", robot_name(0, 0))
+    rows = page.locator('details.group[data-group="g0"] tr[data-robot]')
+    expect(rows.first).to_have_attribute("data-robot", robot_name(0, 0))
+    expect(page.locator(f'tr[data-robot="{in_trouble}"]')).to_have_count(0)
     open_page(page, server.url + "/?sort=level")
-    expect(first).to_have_attribute("data-robot", robot_name(0, PER_GROUP - 1))
-    expect(first).to_have_attribute("data-state", "ERROR")
+    expect(rows.first).to_have_attribute("data-robot", in_trouble)
+    expect(rows.first).to_have_attribute("data-state", "ERROR")
 
 
-def test_list_all_lists_the_rest_of_a_group_and_a_refresh_keeps_it(
+def test_list_all_lists_the_rest_of_a_group_takes_no_other_groups_rows_and_a_refresh_keeps_it(
     page: Page, server: OverseerServer
 ) -> None:
     open_page(page, server.url + "/")
-    page.click(f'details.group[data-group="g5"] .more-rows button[data-list="{PER_GROUP}"]')
-    expect(page.locator('details.group[data-group="g5"] tr[data-robot]')).to_have_count(PER_GROUP)
-    expect(page.locator('details.group[data-group="g5"] .more-rows')).to_have_count(0)
+    page.click('details.group[data-group="g0"] .more-rows button[data-list="all"]')
+    expect(page.locator('details.group[data-group="g0"] tr[data-robot]')).to_have_count(PER_GROUP)
+    expect(page.locator('details.group[data-group="g0"] .more-rows')).to_have_count(0)
+    # the keyboard's place: the first robot the group had not listed
+    assert page.evaluate("document.activeElement.textContent") == robot_name(0, GROUP_ROWS)
+    page.click('details.group[data-group="g5"] .more-rows button[data-list="all"]')
     wait_for_refresh(page)
-    assert listed_per_group(page)["g5"] == PER_GROUP
-    assert listed_per_group(page)["g0"] == GROUP_ROWS
-    listed = PAGE_ROWS + PER_GROUP
+    listed = listed_per_group(page)
+    assert listed == {"g0": PER_GROUP, "g1": 100, "g2": 100, "g3": 100, "g4": 100, "g5": PER_GROUP}, listed
+    total = GROUPS * PER_GROUP
     expect(page.locator("#showing")).to_have_text(
-        f"Showing {GROUPS * PER_GROUP} of {GROUPS * PER_GROUP} robots, {listed} listed"
+        f"Showing {total} of {total} robots, {sum(listed.values())} listed"
     )
+
+
+def test_listing_more_needs_no_new_read_of_the_fleet(page: Page, server: OverseerServer) -> None:
+    open_page(page, server.url + "/")
+    held: list[Route] = []
+
+    def hold(route: Route) -> None:
+        held.append(route)  # never answered: from now on the fleet's reads do not come back
+
+    page.route("**/api/v1/robots", hold)
+    page.click('details.group[data-group="g5"] .more-rows button[data-list="all"]')
+    expect(page.locator('details.group[data-group="g5"] tr[data-robot]')).to_have_count(PER_GROUP)
 
 
 def test_a_page_whose_reads_take_long_refreshes_less_often(page: Page, server: OverseerServer) -> None:
@@ -123,7 +143,26 @@ def test_a_page_whose_reads_take_long_refreshes_less_often(page: Page, server: O
 
     page.route("**/api/v1/robots", slowly)
     open_page(page, server.url + "/")
-    page.wait_for_timeout(11_000)
+    page.wait_for_timeout(15_000)
     gaps = [later - earlier for earlier, later in itertools.pairwise(starts)]
     assert len(gaps) >= 1, starts
     assert min(gaps) >= 4.5, gaps  # a second's read, then four times as long; 2 s apart when reads are quick
+
+
+def test_a_read_that_failed_is_tried_again_at_the_usual_pace(page: Page, server: OverseerServer) -> None:
+    """Reads that fail after a second: the page says so and tries again 2 s later, with no back-off."""
+    starts: list[float] = []
+
+    def failing(route: Route) -> None:
+        starts.append(time.monotonic())
+        time.sleep(1.0)
+        route.abort()
+
+    open_page(page, server.url + "/")
+    expect_failed_request(page, "/api/v1/robots")
+    page.route("**/api/v1/robots", failing)
+    expect(page.locator("#error")).to_contain_text("cannot reach the exporter", timeout=10_000)
+    page.wait_for_timeout(8_000)
+    gaps = [later - earlier for earlier, later in itertools.pairwise(starts)]
+    assert len(gaps) >= 2, starts
+    assert max(gaps) < 4.0, gaps  # a second's read, then 2 s; five seconds were it backed off

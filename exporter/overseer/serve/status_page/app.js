@@ -13,8 +13,10 @@ import {buildTree, renderTree} from "./tree.js";
 
 const REFRESH_MS = 2000;
 // A refresh that took long (a large fleet's answers on a busy exporter) waits this many times as long
-// before the next: an open page takes at most a fifth of the time of the exporter's reads.
+// before the next, up to REFRESH_MAX_MS: an idle open page keeps the exporter busy a fifth of the time at
+// most. A refresh that failed is tried again after REFRESH_MS.
 const REFRESH_BACKOFF = 4;
+const REFRESH_MAX_MS = 30000;
 const MATCH_LIMIT = 200;
 const SEARCH_DELAY_MS = 250;
 
@@ -26,7 +28,8 @@ let timeline = null;
 let timer = null;
 let generation = 0;  // a render started for an older view is dropped
 let rendered = false;
-let counting = null;  // the robot view's read of the fleet's counts, while under way
+let counting = null;  // the robot view's read of the fleet's counts, started by the refresh under way
+let shownFleet = null;  // the fleet view shown: its view, robots document and the robots its search matched
 
 function setView(next, how) {
   view = next;
@@ -78,11 +81,19 @@ async function renderFleet(current) {
     ? new Set(robots.robots.filter((r) => hasLabels(r, current.labels)).map((r) => r.robot)) : null;
   renderSummary(robots, current, toggleLevel);
   renderLabelControls(robots.robots, current, groupBy, filterLabel);
-  renderRobots(robots, current, matched, {openGroups, listedRows}, openRobot, refresh);
+  shownFleet = {view: current, robots, matched};
+  renderRobots(robots, current, matched, {openGroups, listedRows}, openRobot, listMore);
   renderMatches(matches, current, labelled, openRobot);
   document.getElementById("fleet-view").hidden = false;
   document.getElementById("robot-view").hidden = true;
   return true;
+}
+
+/** The fleet's groups again, as the user asked one to list more rows: from the robots shown, no read. */
+function listMore() {
+  if (shownFleet !== null && shownFleet.view === view) {
+    renderRobots(shownFleet.robots, view, shownFleet.matched, {openGroups, listedRows}, openRobot, listMore);
+  }
 }
 
 function showHistoryOf(component) {
@@ -174,6 +185,8 @@ async function refresh() {
   const mine = ++generation;
   const current = view;
   const started = performance.now();
+  let failed = false;
+  counting = null;
   try {
     const done = current.robot !== null ? await renderRobot(current) : await renderFleet(current);
     if (done && mine === generation) {
@@ -187,11 +200,13 @@ async function refresh() {
       document.body.dataset.refreshes = String(Number(document.body.dataset.refreshes || 0) + 1);
     }
   } catch (error) {
+    failed = true;
     if (mine === generation) showError(`cannot reach the exporter: ${error.message}`);
   }
   if (counting !== null) await counting;
   const took = performance.now() - started;
-  if (mine === generation) timer = setTimeout(refresh, Math.max(REFRESH_MS, REFRESH_BACKOFF * took));
+  const delay = failed ? REFRESH_MS : Math.min(REFRESH_MAX_MS, Math.max(REFRESH_MS, REFRESH_BACKOFF * took));
+  if (mine === generation) timer = setTimeout(refresh, delay);
 }
 
 function setUpControls() {

@@ -117,17 +117,22 @@ export function renderRobots(robotsDocument, view, matchedRobots, {openGroups, l
   const shown = visibleRobots(robotsDocument.robots, view, matchedRobots);
   const labelled = robotsDocument.robots.some((robot) => Object.keys(robot.labels || {}).length > 0);
   const headings = ["Level", "Robot", ...(labelled ? ["Labels"] : []), "Components", "Last message"];
+  const refocus = focusedListButton();
   const sections = [];
   let budget = PAGE_ROWS;
   let listedTotal = 0;
   for (const [name, robots] of groupRobots(shown, view.group, view.sort === "name")) {
     const key = `${view.group ?? ""}\u0000${name}`;
+    const title = groupTitle(name, view.group);
     const judged = robots.filter((r) => !r.maintenance);
     const worst = judged.length ? worstState(judged.map((r) => r.state)) : MAINTENANCE;
     const perState = [...STATES, MAINTENANCE].map((s) => [s, robots.filter((r) => shownState(r) === s).length])
       .filter(([, n]) => n);
-    const listed = Math.min(robots.length, listedRows.get(key) ?? Math.min(GROUP_ROWS, budget));
-    budget = Math.max(0, budget - listed);
+    // What the user asked a group to list comes on top of its share of the page: it takes no other
+    // group's rows, and never lists fewer than that share (the group may have grown since).
+    const share = Math.min(robots.length, GROUP_ROWS, budget);
+    budget -= share;
+    const listed = Math.min(robots.length, Math.max(share, listedRows.get(key) ?? 0));
     listedTotal += listed;
     const listMore = (count) => {
       listedRows.set(key, count);
@@ -136,13 +141,13 @@ export function renderRobots(robotsDocument, view, matchedRobots, {openGroups, l
     const details = element("details", {class: "group", "data-group": name, open: openGroups.get(key) ?? true},
       element("summary", {},
         badge(worst), " ",
-        element("span", {class: "group-name"}, groupTitle(name, view.group)),
+        element("span", {class: "group-name"}, title),
         element("small", {}, `${robots.length} robots: ${perState.map(([s, n]) => `${n} ${s}`).join(", ")}`)),
       listed > 0 ? element("table", {class: "robots"},
         element("thead", {}, element("tr", {}, ...headings.map((h) => element("th", {}, h)))),
         element("tbody", {}, ...robots.slice(0, listed).map((robot) => robotRow(robot, now, labelled, onOpenRobot))))
         : null,
-      listed < robots.length ? moreRows(listed, robots.length, view.sort, listMore) : null);
+      listed < robots.length ? moreRows(listed, robots.length, title, view.sort, listMore) : null);
     details.firstChild.addEventListener("click", () => openGroups.set(key, !details.open));
     sections.push(details);
   }
@@ -150,21 +155,44 @@ export function renderRobots(robotsDocument, view, matchedRobots, {openGroups, l
   document.getElementById("showing").textContent =
     `Showing ${shown.length} of ${robotsDocument.robots.length} robots${unlisted}`;
   document.getElementById("groups").replaceChildren(...sections);
+  if (refocus !== null) focusAgain(sections, refocus);
 }
 
-/** Below a group that lists `listed` of its `total` robots: how many are not listed, and buttons that list more. */
-function moreRows(listed, total, sort, listMore) {
-  const button = (text, count) => {
-    const node = element("button", {type: "button", "data-list": String(count)}, text);
+/** Below a group that lists `listed` of its `total` robots: how many are not listed, and buttons that list
+ * more (`listMore` is given the rows to list). */
+function moreRows(listed, total, title, sort, listMore) {
+  const button = (kind, text, label, count) => {
+    const node = element("button", {type: "button", "data-list": kind, "data-from": String(listed),
+                                    "aria-label": label}, text);
     node.addEventListener("click", () => listMore(count));
     return node;
   };
   const order = sort === "name" ? "by name" : "the sort's first";
-  const next = Math.min(total, listed + MORE_ROWS);
+  const more = Math.min(MORE_ROWS, total - listed);
   return element("p", {class: "more-rows"},
-    `${total - listed} more robots not listed (${listed} listed, ${order}) `,
-    next < total ? button(`list ${next - listed} more`, next) : null, " ",
-    button(`list all ${total}`, total));
+    listed === 0 ? `${total} robots not listed ` : `${total - listed} more robots not listed (${listed} listed, ${order}) `,
+    more < total - listed
+      ? button("more", `list ${more} more`, `list ${more} more robots of ${title}`, listed + more) : null,
+    " ",
+    button("all", `list all ${total}`, `list all ${total} robots of ${title}`, Infinity));
+}
+
+/** The "list more" button that has the focus, if one has: {group, kind, from}; else null. */
+function focusedListButton() {
+  const focused = document.activeElement;
+  const group = focused?.closest?.("details.group");
+  if (!group || focused.dataset.list === undefined) return null;
+  return {group: group.dataset.group, kind: focused.dataset.list, from: Number(focused.dataset.from)};
+}
+
+/** The focus back where it was after the groups were built again: on the same button of the same group,
+ * or, that button gone (the group lists them all), on the first robot it had not listed. */
+function focusAgain(sections, {group, kind, from}) {
+  const section = sections.find((details) => details.dataset.group === group);
+  if (!section) return;
+  const target = section.querySelector(`.more-rows button[data-list="${kind}"]`)
+    ?? section.querySelectorAll("tr[data-robot] a")[from];
+  target?.focus();
 }
 
 function robotRow(robot, now, labelled, onOpenRobot) {
