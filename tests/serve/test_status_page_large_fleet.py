@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 from playwright.sync_api import Browser, Page, Route, expect
@@ -132,37 +132,40 @@ def test_listing_more_needs_no_new_read_of_the_fleet(page: Page, server: Oversee
     expect(page.locator('details.group[data-group="g5"] tr[data-robot]')).to_have_count(PER_GROUP)
 
 
-def test_a_page_whose_reads_take_long_refreshes_less_often(page: Page, server: OverseerServer) -> None:
-    """Reads of the fleet made to take a second (the test holds each request): the page waits 4 s more."""
+def fleet_reads_a_second_long(page: Page, end: Callable[[Route], None]) -> list[float]:
+    """Hold each of the page's reads of the fleet for a second, then `end` it; the list of when each began."""
     starts: list[float] = []
 
-    def slowly(route: Route) -> None:
+    def held(route: Route) -> None:
         starts.append(time.monotonic())
         time.sleep(1.0)
-        route.continue_()
+        end(route)
 
-    page.route("**/api/v1/robots", slowly)
+    page.route("**/api/v1/robots", held)
+    return starts
+
+
+def gaps_between(starts: list[float]) -> list[float]:
+    return [later - earlier for earlier, later in itertools.pairwise(starts)]
+
+
+def test_a_page_whose_reads_take_long_refreshes_less_often(page: Page, server: OverseerServer) -> None:
+    """Reads of the fleet made to take a second: the page waits 4 s more."""
+    starts = fleet_reads_a_second_long(page, Route.continue_)
     open_page(page, server.url + "/")
     page.wait_for_timeout(15_000)
-    gaps = [later - earlier for earlier, later in itertools.pairwise(starts)]
+    gaps = gaps_between(starts)
     assert len(gaps) >= 1, starts
     assert min(gaps) >= 4.5, gaps  # a second's read, then four times as long; 2 s apart when reads are quick
 
 
 def test_a_read_that_failed_is_tried_again_at_the_usual_pace(page: Page, server: OverseerServer) -> None:
     """Reads that fail after a second: the page says so and tries again 2 s later, with no back-off."""
-    starts: list[float] = []
-
-    def failing(route: Route) -> None:
-        starts.append(time.monotonic())
-        time.sleep(1.0)
-        route.abort()
-
     open_page(page, server.url + "/")
     expect_failed_request(page, "/api/v1/robots")
-    page.route("**/api/v1/robots", failing)
+    starts = fleet_reads_a_second_long(page, Route.abort)
     expect(page.locator("#error")).to_contain_text("cannot reach the exporter", timeout=10_000)
     page.wait_for_timeout(8_000)
-    gaps = [later - earlier for earlier, later in itertools.pairwise(starts)]
+    gaps = gaps_between(starts)
     assert len(gaps) >= 2, starts
     assert max(gaps) < 4.0, gaps  # a second's read, then 2 s; five seconds were it backed off
