@@ -129,6 +129,34 @@ def test_text_matches_robot_component_hardware_id_and_message_ignoring_case(
     assert search("nothing like it") == set()
 
 
+def test_text_folds_case_beyond_ascii_and_never_matches_across_two_texts() -> None:
+    """A robot's texts are searched joined at first; only a text that has the needle itself matches."""
+    model = FleetModel(FleetLimits())
+    model.apply("werk/r1", array((1, "/Tür/Sensor", "Straße blockiert", "GROSS-1")), "dds")
+    model.apply("werk/r2", array((0, "/Motor", "läuft", ""), (0, "/Gate", "open", "")), "dds")
+    model.apply(
+        "werk/r3",
+        array(
+            (0, "/Pump", "MASSE OK", ""),
+        ),
+        "dds",
+    )  # ASCII only
+    snapshot = model.snapshot()
+
+    def search(text: str, levels: frozenset[Level] | None = None) -> set[tuple[str, str]]:
+        query = ComponentQuery(text=text, levels=levels)
+        return {(r, n) for r, n, _ in found(components_document(snapshot, query))}
+
+    assert search("STRASSE") == {("werk/r1", "/Tür/Sensor")}  # ß folds to ss
+    assert search("groß") == {("werk/r1", "/Tür/Sensor")}  # and the needle's too, in a hardware_id
+    assert search("maße") == {("werk/r3", "/Pump")}
+    assert search("TÜR") == {("werk/r1", "/Tür/Sensor")}
+    assert search("LÄUFT", frozenset({Level.OK})) == {("werk/r2", "/Motor")}
+    # "/Motor" and "/Gate" are neighbours among the robot's names, but no one text holds both
+    assert search("motor\n/gate") == set()
+    assert search("läuft\nopen") == set()
+
+
 def test_robots_list_every_robot_with_a_match_and_how_many(fleet: tuple[FleetModel, ManualClock]) -> None:
     document = components_document(fleet[0].snapshot(), ComponentQuery(text="battery", limit=1))
     assert document["robots"] == [

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import heapq
+from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import chain, compress
+from operator import itemgetter
 from typing import Any
 
 from overseer.levels import Level, severity_rank, worst
@@ -122,19 +125,22 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
     or its message. `total` counts every match; `robots` lists every robot with a match and how many.
     """
     needle = query.text.casefold()
+    wanted = query.levels
     matches: list[tuple[int, str, str, str, Component, Level]] = []
     per_robot: dict[str, int] = {}
     for robot in snapshot.robots:
         if query.robot is not None and robot.name != query.robot:
             continue
         robot_matches = not needle or needle in robot.name.casefold()
-        up = snapshot.robot_up(robot)
+        if not robot_matches and wanted is None and not _may_mention(robot, needle):
+            continue
+        levels = snapshot.component_levels(robot, snapshot.robot_up(robot))
+        candidates: Iterator[tuple[Component, Level]] = zip(robot.components.values(), levels, strict=True)
+        if wanted is not None:
+            # the levels asked for, picked in C: a fleet has few components in trouble
+            candidates = compress(candidates, map(wanted.__contains__, levels))
         count = 0
-        for component, level in zip(
-            robot.components.values(), snapshot.component_levels(robot, up), strict=True
-        ):
-            if query.levels is not None and level not in query.levels:
-                continue
+        for component, level in candidates:
             if not (
                 robot_matches
                 or needle in component.name.casefold()
@@ -173,3 +179,18 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
         ],
         "robots": [{"robot": name, "matches": count} for name, count in sorted(per_robot.items())],
     }
+
+
+_NAME, _MESSAGE, _HARDWARE_ID = itemgetter(0), itemgetter(2), itemgetter(3)
+
+
+def _may_mention(robot: RobotState, needle: str) -> bool:
+    """False when no component of `robot` has `needle` in its name, message or hardware_id.
+
+    Each text of the robot is joined into one string and searched at once, in C; True only says that a
+    component may match (the needle may span two joined texts), for the exact test to decide.
+    """
+    components = robot.components
+    values = components.values()
+    texts = "\n".join(chain(map(_NAME, components), map(_MESSAGE, values), map(_HARDWARE_ID, values)))
+    return needle in texts.casefold()
