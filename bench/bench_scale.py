@@ -365,6 +365,7 @@ def run(
         floor_counter(wires, Path(tmp), floor) as counter,
     ):
         pid = exporter.process.pid
+        idle_rss = tree_resident_bytes(pid)  # before the fleet: what the processes take following no robot
         started_cpu, router_cpu, started = tree_cpu_seconds(pid), wires.router_cpu(), 0.0
         with running_loadgen(
             [
@@ -446,6 +447,12 @@ def run(
             "µs",
         ),
         Row("scale", f"{label}: exporter memory a component", rss / (robots * shape.components), "bytes"),
+        Row(
+            "scale",
+            f"{label}: of which beyond its processes' own ({idle_rss / 1e6:.0f} MB following no robot)",
+            (rss - idle_rss) / (robots * shape.components),
+            "bytes",
+        ),
         *(
             [Row("scale", f"{label}: router CPU", router_cpu / elapsed * 100, "% of a core")]
             if wires.router
