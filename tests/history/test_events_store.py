@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
@@ -147,11 +148,32 @@ def test_a_batch_is_written_thousands_of_events_a_statement_with_its_ids_and_val
     store.add(events)
     with caplog.at_level(logging.INFO, logger="overseer.events"):
         assert store.flush() == count
-    assert len(inserts) == 3
+    assert len(inserts) == 5  # two of 2,000 events, then the 7 left as 4, 2 and 1
     stored = list(reversed(everything(store, EventQuery(since=1000.0, limit=5000))))
     assert stored == [event.document(event_id) for event_id, event in enumerate(events, start=2)]
     logged = [r.event for r in caplog.records if r.name == "overseer.events"]  # type: ignore[attr-defined]
     assert logged == stored
+
+
+def test_flushes_of_every_size_run_a_dozen_insert_texts_so_sqlite_keeps_few_prepared(tmp_path: Path) -> None:
+    # sqlite3 keeps each INSERT text it ran prepared, about 1.2 kB an event of it: one text for each
+    # length a flush's last chunk had took up to 150 MB of the exporter, whose flushes take what came
+    store = EventStore(settings(tmp_path / "events.db"))
+    assert store._writer is not None
+    sizes: set[int] = set()  # the texts, by the events each inserts (the trace has the values in them)
+    store._writer.set_trace_callback(
+        lambda sql: sizes.add(sql.count("), (") + 1) if sql.startswith("INSERT") else None
+    )
+    total = 0
+    for count in range(1, MAX_ROWS_PER_STATEMENT + 200, 53):  # 42 flushes, each of a size of its own
+        store.add([level_event(float(total + i), component=f"/c{i}") for i in range(count)])
+        total += count
+        assert store.flush() == count
+    assert len(sizes) <= MAX_ROWS_PER_STATEMENT.bit_length() + 1, sorted(sizes)
+    assert max(sizes) == MAX_ROWS_PER_STATEMENT
+    assert store.stats().written == total
+    with contextlib.closing(sqlite3.connect(tmp_path / "events.db")) as reader:
+        assert reader.execute("SELECT count(*) FROM events").fetchone() == (total,)
 
 
 def test_pages_are_newest_first_and_the_cursor_loses_nothing_even_at_equal_times(tmp_path: Path) -> None:
