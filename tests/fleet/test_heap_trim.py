@@ -1,4 +1,4 @@
-"""Every exporter process hands freed heap memory back to the system once a minute."""
+"""Every exporter process hands freed heap memory back to the system once a minute, from two arenas."""
 
 from __future__ import annotations
 
@@ -84,11 +84,64 @@ def test_without_malloc_trim_nothing_is_started(monkeypatch: pytest.MonkeyPatch)
     assert heap_trim.trim_heap_every() is None
 
 
+# Threads allocating at once, each from the arena glibc gives it; then glibc's count of its arenas.
+_THREADS_ALLOCATING = """
+import ctypes, sys, threading
+from overseer.heap_trim import limit_heap_arenas
+
+limited = limit_heap_arenas() if sys.argv[1] == "limit" else None
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+together = threading.Barrier(8)
+
+def allocate() -> None:
+    together.wait()
+    for _ in range(2000):
+        libc.malloc(1000)  # kept: ctypes lets go of the interpreter lock, so the threads allocate at once
+
+threads = [threading.Thread(target=allocate) for _ in range(8)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+libc.malloc_stats()  # to stderr, an "Arena N:" paragraph an arena
+print(limited)
+"""
+
+
+def arenas_of_eight_threads(limit: bool, **environment: str) -> tuple[str, int]:
+    """What `limit_heap_arenas` said, and how many arenas eight threads allocating at once used."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
+    env["PYTHONPATH"] = str(Path(heap_trim.__file__).parents[1])
+    result = subprocess.run(
+        [sys.executable, "-c", _THREADS_ALLOCATING, "limit" if limit else "leave"],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**env, **environment},
+    )
+    return result.stdout.strip(), result.stderr.count("Arena ")
+
+
+def test_the_threads_of_a_process_share_two_arenas_once_limited() -> None:
+    said, arenas = arenas_of_eight_threads(limit=False)
+    assert said == "None" and arenas > 2, "these threads took no arenas of their own: nothing to show"
+    assert arenas_of_eight_threads(limit=True) == ("True", 2)
+
+
+def test_an_arena_count_the_environment_sets_is_left_to_glibc() -> None:
+    assert arenas_of_eight_threads(limit=True, MALLOC_ARENA_MAX="3") == ("False", 3)
+    assert arenas_of_eight_threads(limit=True, GLIBC_TUNABLES="glibc.malloc.arena_max=1") == ("False", 1)
+
+
 @pytest.fixture
 def started(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """Which commands started the trimming thread (the thread itself is not started)."""
+    """Which commands limited their arenas and started the trimming thread (neither done here)."""
     calls: list[str] = []
     for module in ("overseer.commands.run", "overseer.commands.demo", "overseer.fleet.workers.process"):
+        monkeypatch.setattr(
+            f"{module}.limit_heap_arenas", lambda module=module: calls.append(f"{module}: arenas")
+        )
         monkeypatch.setattr(f"{module}.trim_heap_every", lambda module=module: calls.append(module))
     return calls
 
@@ -98,7 +151,12 @@ def test_overseer_run_and_demo_trim_their_heap(
 ) -> None:
     assert main(["run", "--config.file", str(tmp_path / "missing.yml")]) == 2
     assert main(["demo", "--web.listen-address", "no port here"]) == 2
-    assert started == ["overseer.commands.run", "overseer.commands.demo"]
+    assert started == [
+        "overseer.commands.run: arenas",
+        "overseer.commands.run",
+        "overseer.commands.demo: arenas",
+        "overseer.commands.demo",
+    ]
     capsys.readouterr()
 
 
@@ -109,4 +167,4 @@ def test_an_ingest_worker_trims_its_heap_with_serving_and_exit_stubbed(
     monkeypatch.setattr(os, "_exit", lambda status: None)
     monkeypatch.setattr(logging, "shutdown", lambda: None)  # pytest's own handlers stay open
     worker_process.run_worker(Config(), 0, 2, None, None)  # type: ignore[arg-type]
-    assert started == ["overseer.fleet.workers.process"]
+    assert started == ["overseer.fleet.workers.process: arenas", "overseer.fleet.workers.process"]

@@ -21,7 +21,7 @@ from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.workers.merge import portable_robots
 from overseer.garbage_collection import collect_in_large_batches
-from overseer.heap_trim import trim_heap_every
+from overseer.heap_trim import limit_heap_arenas, trim_heap_every
 from overseer.log_format import configure_logging
 from overseer.model.events import Event, event_rows
 
@@ -88,6 +88,7 @@ def run_worker(
     worker left behind by a dead exporter would hold its robots' readers for good.
     """
     collect_in_large_batches()
+    limit_heap_arenas()
     trim_heap_every()
     status = 1
     try:
