@@ -79,9 +79,10 @@ def limit_heap_arenas(arenas: int = HEAP_ARENAS) -> bool:
     Left as it is where the C library has no `mallopt`, or where the environment already says how many
     (`MALLOC_ARENA_MAX`, or `arena_max` in `GLIBC_TUNABLES`).
     """
-    if _MALLOPT is None or "MALLOC_ARENA_MAX" in os.environ:
+    if _MALLOPT is None:
+        log.debug("no mallopt in this C library: each thread may keep a heap of its own")
         return False
-    if "glibc.malloc.arena_max" in os.environ.get("GLIBC_TUNABLES", ""):
+    if "MALLOC_ARENA_MAX" in os.environ or "glibc.malloc.arena_max" in os.environ.get("GLIBC_TUNABLES", ""):
         return False
     return _MALLOPT(_M_ARENA_MAX, arenas) == 1
 

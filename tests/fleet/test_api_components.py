@@ -134,13 +134,7 @@ def test_text_folds_case_beyond_ascii_and_never_matches_across_two_texts() -> No
     model = FleetModel(FleetLimits())
     model.apply("werk/r1", array((1, "/Tür/Sensor", "Straße blockiert", "GROSS-1")), "dds")
     model.apply("werk/r2", array((0, "/Motor", "läuft", ""), (0, "/Gate", "open", "")), "dds")
-    model.apply(
-        "werk/r3",
-        array(
-            (0, "/Pump", "MASSE OK", ""),
-        ),
-        "dds",
-    )  # ASCII only
+    model.apply("werk/r3", array((0, "/Pump", "MASSE OK", "")), "dds")  # ASCII only
     snapshot = model.snapshot()
 
     def search(text: str, levels: frozenset[Level] | None = None) -> set[tuple[str, str]]:

@@ -18,8 +18,14 @@ from overseer.garbage_collection import YOUNG_THRESHOLD, collect_in_large_batche
 
 
 @pytest.fixture
-def thresholds() -> Iterator[None]:
-    """Python's default thresholds for the test, and the session's own back after it."""
+def thresholds(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """Python's default thresholds for the test, and the session's own back after it.
+
+    The commands' heap policy (two arenas, a trimming thread) is left out: it would stay with this process.
+    """
+    for module in ("overseer.commands.run", "overseer.commands.demo", "overseer.fleet.workers.process"):
+        monkeypatch.setattr(f"{module}.limit_heap_arenas", lambda: False)
+        monkeypatch.setattr(f"{module}.trim_heap_every", lambda: None)
     before = gc.get_threshold()
     gc.set_threshold(700, 10, 10)
     yield

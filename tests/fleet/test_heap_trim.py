@@ -78,6 +78,11 @@ def test_a_process_starts_one_trimming_thread_however_often_asked(monkeypatch: p
     assert heap_trim.trim_heap_every() is None
 
 
+def test_without_mallopt_the_arenas_are_left_as_they_are(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(heap_trim, "_MALLOPT", None)
+    assert heap_trim.limit_heap_arenas() is False
+
+
 def test_without_malloc_trim_nothing_is_started(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(heap_trim, "_TRIM", None)
     assert heap_trim.trim_heap() is False

@@ -181,7 +181,9 @@ def components_document(snapshot: FleetSnapshot, query: ComponentQuery) -> dict[
     }
 
 
-_NAME, _MESSAGE, _HARDWARE_ID = itemgetter(0), itemgetter(2), itemgetter(3)
+_NAME = itemgetter(0)  # of a robot's component keys
+_MESSAGE = itemgetter(Component._fields.index("message"))
+_HARDWARE_ID = itemgetter(Component._fields.index("hardware_id"))
 
 
 def _may_mention(robot: RobotState, needle: str) -> bool:

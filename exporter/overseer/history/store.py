@@ -278,7 +278,7 @@ class EventStore:
             writer.execute("BEGIN IMMEDIATE")  # the write lock first: the ids read next stay ours
             first = _sequence(writer) if self.settings.log_events else 0
             start = 0
-            for size in statement_sizes(len(rows), self._rows_per_statement):
+            for size in _statement_sizes(len(rows), self._rows_per_statement):
                 chunk = rows[start : start + size]
                 start += size
                 writer.execute(insert_statement(size), [field for row in chunk for field in row])
@@ -345,7 +345,7 @@ def _statement_rows(connection: sqlite3.Connection) -> int:
     return max(1, min(MAX_ROWS_PER_STATEMENT, bound // _FIELDS))
 
 
-def statement_sizes(rows: int, per_statement: int) -> Iterator[int]:
+def _statement_sizes(rows: int, per_statement: int) -> Iterator[int]:
     """How many of a flush's `rows` events each INSERT writes: `per_statement`, then powers of two.
 
     sqlite3 keeps each INSERT text it ran prepared (128 texts a connection), about 1.2 kB an event of
