@@ -22,6 +22,7 @@ import logging
 import os
 import threading
 from collections.abc import Callable
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -30,37 +31,24 @@ HEAP_ARENAS = 2
 _M_ARENA_MAX = -8  # mallopt's parameter (malloc.h)
 
 
-def _glibc_trim() -> Callable[[int], int] | None:
-    """The C library's `malloc_trim(size_t pad) -> int` (glibc's), or None where it has none (musl, macOS)."""
+def _c_function(name: str, *argtypes: type[ctypes._SimpleCData[Any]]) -> Callable[..., int] | None:
+    """The C library's function `name` returning an int (glibc's), or None where it has none (musl, macOS)."""
     for library in ("libc.so.6", None):  # glibc by its soname, else whatever C library the process has
         try:
-            trim = getattr(ctypes.CDLL(library), "malloc_trim", None)
+            function = getattr(ctypes.CDLL(library), name, None)
         except OSError:
             continue
-        if trim is not None:
-            trim.argtypes = [ctypes.c_size_t]
-            trim.restype = ctypes.c_int
-            found: Callable[[int], int] = trim
+        if function is not None:
+            function.argtypes = list(argtypes)
+            function.restype = ctypes.c_int
+            found: Callable[..., int] = function
             return found
     return None
 
 
-def _glibc_mallopt() -> Callable[[int, int], int] | None:
-    """The C library's `mallopt(int param, int value) -> int` (glibc's), or None where it has none."""
-    try:
-        mallopt = getattr(ctypes.CDLL("libc.so.6"), "mallopt", None)
-    except OSError:
-        return None
-    if mallopt is None:
-        return None
-    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    mallopt.restype = ctypes.c_int
-    found: Callable[[int, int], int] = mallopt
-    return found
-
-
-_TRIM = _glibc_trim()
-_MALLOPT = _glibc_mallopt()
+# malloc_trim(size_t pad) and mallopt(int param, int value)
+_TRIM: Callable[[int], int] | None = _c_function("malloc_trim", ctypes.c_size_t)
+_MALLOPT: Callable[[int, int], int] | None = _c_function("mallopt", ctypes.c_int, ctypes.c_int)
 _guard = threading.Lock()
 _trimming = False  # this process's own trimming thread was started
 
