@@ -14,7 +14,7 @@ from overseer.config.parsers import boolean, listed, string, whole_number
 ZENOH_MODES = ("client", "peer")
 ZENOH_KEY_FORMATS = ("rmw_zenoh", "bridge")
 _ZENOH_ENDPOINT = re.compile(r"[a-z][a-z0-9-]*/\S+")
-DEFAULT_QUEUE_LENGTH = 65_536  # 6.5 s of 10,000 robots at 1 Hz, their first seconds' backlog
+DEFAULT_QUEUE_LENGTH = 131_072  # 13 s of 10,000 robots at 1 Hz, their first look's backlog (~4 kB each)
 MAX_QUEUE_LENGTH = 10_000_000
 
 
@@ -100,12 +100,12 @@ OPTIONS: tuple[Option, ...] = (
     option(
         "zenoh.queue_length",
         f"{DEFAULT_QUEUE_LENGTH}",
-        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds: per "
-        "subscription of the exporter's session (two topics per key format), where beyond it Zenoh waits "
-        "and the router drops what does not fit (counted as lost where rmw_zenoh numbers it); and with "
-        "several ingest workers, also per worker, where beyond it samples are dropped and counted. Each "
-        "holds its payload while it waits (about 5 kB at 50 components): the memory it may take is this "
-        "many times the largest sample",
+        "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds: "
+        "copied out of Zenoh as they arrive, they wait for the ingest (for each ingest worker's, with "
+        "several), and beyond it are dropped and counted as dropped. Each holds its payload while it "
+        "waits (about 4 kB at 50 components): the memory it may take is this many times the largest "
+        "sample. Zenoh's own channel of each subscription has the same bound (beyond it the router drops "
+        "what does not fit, counted as lost where rmw_zenoh numbers it), but is emptied as it fills",
         metavar="N",
     ),
     option(

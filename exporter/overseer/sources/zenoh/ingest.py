@@ -32,6 +32,7 @@ from overseer.sources.zenoh.keys import (
     attachment_fields,
     parse_data_key,
 )
+from overseer.sources.zenoh.relay_items import DROPPED, ERROR, SAMPLE, TOKEN, Item
 from overseer.sources.zenoh.sequence_gaps import SequenceGaps
 from overseer.sources.zenoh.tokens import token_subject
 
@@ -110,6 +111,22 @@ class ZenohIngest:
             log.debug("undecodable sample on %s: %s", key, error)
         except Exception:  # a sample must never end the thread that hands them over
             log.exception("failed to process diagnostics from %s", key)
+
+    def on_items(self, items: list[Item]) -> int:
+        """Apply a batch of what the session heard (`relay_items.py`), in order; returns its samples."""
+        samples = 0
+        for item in items:
+            kind = item[0]
+            if kind == SAMPLE:
+                samples += 1
+                self.on_sample(item[1], item[2], item[3])
+            elif kind == TOKEN:
+                self.on_token(item[1], item[2])
+            elif kind == DROPPED:
+                self.dropped(item[1], item[2])
+            elif kind == ERROR:
+                self.count_source_error(item[1])
+        return samples
 
     def dropped(self, count: int, heard: list[tuple[bytes, int]]) -> None:
         """`count` samples were dropped before they reached this ingest (a full queue); counted as such.

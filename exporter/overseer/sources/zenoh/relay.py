@@ -5,7 +5,8 @@ hears every robot (and the fleet's samples cross into every worker: the cost mul
 or subscribes to each of its robots' topics (a declaration costs the session and the router more the
 more there are: about 1 ms each at 4,000, so seconds of CPU as a large fleet is first heard). The
 exporter's process holds the one session instead, with the wildcard subscriptions of one worker, and
-hands each sample to the worker that owns its robot through a pipe, in batches (`relay_items.py`):
+hands each sample to the worker that owns its robot through a pipe, in batches (`outbox.py`,
+`relay_items.py`):
 the key tells the robot of a namespaced topic, the publisher's GID, from its liveliness token, that of
 the un-namespaced `/diagnostics`. Every worker gets every token, and a worker started again gets the
 tokens alive then, before any sample. Samples whose robot is not known yet go to every worker, which
@@ -19,22 +20,20 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from multiprocessing.connection import Connection
 
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.zenoh import ZenohConfig
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
-from overseer.sources.zenoh.keys import RejectedKey, attachment_fields, attachment_gid, parse_data_key
+from overseer.sources.zenoh.keys import RejectedKey, attachment_gid, parse_data_key
+from overseer.sources.zenoh.outbox import Deliver, Outbox
 from overseer.sources.zenoh.receiver import ZenohReceiver
-from overseer.sources.zenoh.relay_items import DROPPED, ERROR, SAMPLE, TOKEN, Item, encode_batch
+from overseer.sources.zenoh.relay_items import ERROR, SAMPLE, TOKEN, Item, encode_batch
 from overseer.sources.zenoh.tokens import token_subject
 
 log = logging.getLogger(__name__)
 
-PAUSE_SECONDS = 0.01  # what a sample may wait for its batch to gather: ~100 a batch at 10,000 a second
-MAX_BATCH = 2_000  # items a batch: a worker far behind gets its backlog in pieces, not one huge pickle
 MAX_ROUTES = 100_000  # keys remembered with their worker (bounded against key floods)
 MAX_LIVE_TOKENS = 200_000  # tokens remembered for a worker that starts again, and GIDs with their robot
 _FOREIGN = -1  # a key of a robot another shard follows
@@ -56,7 +55,8 @@ class ZenohRelay:
         self._shard = shard
         self._workers = workers
         self._naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
-        self._outboxes: list[_Outbox | None] = [None] * workers
+        self._outboxes: list[Outbox | None] = [None] * workers
+        self._connections: list[Connection | None] = [None] * workers
         self._routes: dict[str, int] = {}
         self._publishers: dict[bytes, str] = {}  # GID → robot, of the tokens alive
         self._live: dict[str, None] = {}  # the tokens alive, in the order they came
@@ -65,13 +65,14 @@ class ZenohRelay:
 
     def attach(self, worker: int, connection: Connection) -> None:
         """Worker `worker`, started or started again, reads its batches from `connection` from now on."""
-        outbox = _Outbox(connection, self._config.queue_length, f"zenoh-relay-{worker}")
+        outbox = Outbox(self._config.queue_length, _sender(connection), f"zenoh-relay-{worker}")
+        outbox.start()
         with self._lock:
             for key in self._live:
                 outbox.put((TOKEN, key, True))
             old, self._outboxes[worker] = self._outboxes[worker], outbox
-        if old is not None:
-            old.close()
+            old_connection, self._connections[worker] = self._connections[worker], connection
+        _close(old, old_connection)
 
     def start(self) -> None:
         """Open the session in the background."""
@@ -82,9 +83,9 @@ class ZenohRelay:
         self.receiver.stop()
         with self._lock:
             outboxes, self._outboxes = self._outboxes, [None] * len(self._outboxes)
-        for outbox in outboxes:
-            if outbox is not None:
-                outbox.close()
+            connections, self._connections = self._connections, [None] * len(self._connections)
+        for outbox, connection in zip(outboxes, connections, strict=True):
+            _close(outbox, connection)
 
     def on_sample(self, key: str, attachment: bytes | None, payload: bytes) -> None:
         """Hand one sample to the worker of its robot (to every worker while its robot is not known)."""
@@ -149,73 +150,23 @@ class ZenohRelay:
             outbox.put((ERROR, "router_unreachable"))
 
 
-class _Outbox:
-    """What waits for one worker, and the thread that sends it down the worker's pipe in batches."""
+def _sender(connection: Connection) -> Deliver:
+    """Sends a batch down a worker's pipe; False once the worker is gone (the pool starts it again)."""
 
-    def __init__(self, connection: Connection, limit: int, name: str) -> None:
-        self._connection = connection
-        self._limit = limit
-        self._items: list[Item] = []
-        self._samples = 0  # of `_items`
-        self._dropped = 0
-        self._tokens_dropped = 0
-        self._heard: dict[bytes, int] = {}  # the highest number dropped of each publisher
-        self._ready = threading.Condition()
-        self._closed = False
-        threading.Thread(target=self._send_loop, name=name, daemon=True).start()
+    def send(batch: list[Item]) -> bool:
+        try:
+            connection.send_bytes(encode_batch(batch))
+        except (OSError, ValueError):
+            log.debug("an ingest worker's pipe closed while samples were relayed to it")
+            return False
+        return True
 
-    def put(self, item: Item, attachment: bytes | None = None) -> None:
-        """Queue `item`; a sample beyond the limit is dropped, counted with its `attachment`'s number."""
-        is_sample = item[0] == SAMPLE
-        with self._ready:
-            if self._closed:
-                return
-            if not is_sample and len(self._items) >= self._limit + MAX_LIVE_TOKENS:
-                if not self._tokens_dropped:  # a flood of tokens to a worker that is stuck
-                    log.warning("an ingest worker is too far behind: Zenoh tokens dropped from its queue")
-                self._tokens_dropped += 1
-                return
-            if is_sample and self._samples >= self._limit:
-                self._dropped += 1
-                gid, sequence = attachment_fields(attachment)
-                if gid is not None and sequence is not None and len(self._heard) < MAX_LIVE_TOKENS:
-                    self._heard[gid] = max(sequence, self._heard.get(gid, sequence))
-                return
-            self._take_drops()  # they came before this item: the worker takes them in the same order
-            self._items.append(item)
-            self._samples += is_sample
-            self._ready.notify()
+    return send
 
-    def _take_drops(self) -> None:
-        """Queue what was dropped since the last item as one item, under `_ready`."""
-        if self._dropped:
-            self._items.append((DROPPED, self._dropped, list(self._heard.items())))
-            self._dropped, self._heard = 0, {}
 
-    def close(self) -> None:
-        """Send nothing more, and close the pipe: the worker reads to its end."""
-        with self._ready:
-            self._closed = True
-            self._ready.notify()
-        self._connection.close()
-
-    def _send_loop(self) -> None:
-        while True:
-            with self._ready:
-                while not self._items and not self._dropped and not self._closed:
-                    self._ready.wait()
-                if self._closed:
-                    return
-                if len(self._items) <= MAX_BATCH:
-                    self._take_drops()  # after every item that waited: they were dropped after those
-                batch = self._items[:MAX_BATCH]
-                del self._items[:MAX_BATCH]
-                self._samples -= sum(1 for item in batch if item[0] == SAMPLE)
-                more = bool(self._items)
-            try:
-                self._connection.send_bytes(encode_batch(batch))
-            except (OSError, ValueError):  # the worker is gone: the pool attaches the one started again
-                log.debug("an ingest worker's pipe closed while samples were relayed to it")
-                return
-            if not more:
-                time.sleep(PAUSE_SECONDS)  # let the next batch gather rather than send each sample alone
+def _close(outbox: Outbox | None, connection: Connection | None) -> None:
+    """Stop relaying to a worker, and close its pipe: the worker reads to its end."""
+    if outbox is not None:
+        outbox.close()
+    if connection is not None:
+        connection.close()

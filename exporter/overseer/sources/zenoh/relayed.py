@@ -17,7 +17,7 @@ from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.ingest import TICK_SECONDS, TRANSPORT, ZenohIngest
-from overseer.sources.zenoh.relay_items import DROPPED, ERROR, SAMPLE, TOKEN, decode_batch
+from overseer.sources.zenoh.relay_items import decode_batch
 
 log = logging.getLogger(__name__)
 
@@ -59,17 +59,7 @@ class RelayedZenohSource:
                 batch = decode_batch(self._connection.recv_bytes())
             except (EOFError, OSError):
                 return  # the exporter is gone or stopping
-            for item in batch:
-                kind = item[0]
-                if kind == SAMPLE:
-                    self.samples_heard += 1
-                    ingest.on_sample(item[1], item[2], item[3])
-                elif kind == TOKEN:
-                    ingest.on_token(item[1], item[2])
-                elif kind == DROPPED:
-                    ingest.dropped(item[1], item[2])
-                elif kind == ERROR:
-                    ingest.count_source_error(item[1])
+            self.samples_heard += ingest.on_items(batch)
 
     def _upkeep(self) -> None:
         while not self._stop.wait(TICK_SECONDS):

@@ -1,0 +1,104 @@
+"""What the exporter's Zenoh session has heard and its ingest has not taken yet: a bounded queue of items.
+
+The session's drain only copies each sample out of Zenoh and queues it here; a thread of the outbox
+hands the items on in batches, in order: to an ingest worker's pipe (`relay.py`), or to the ingest in
+this process (`source.py`). Zenoh's own channel therefore stays short even while the ingest is seconds
+behind (a large fleet's first look). That matters twice: a sample waiting in Zenoh's channel holds the
+whole buffer its link read it into (17 kB a sample of 4 kB, measured at 10,000 robots: 1 GB for a backlog
+of 65,536), and a full channel stops Zenoh from reading the link, so the router drops what it cannot
+send (to every subscriber it holds up, not only to this one).
+
+Beyond `limit` samples, a sample is dropped; the drops are queued as one item, in their place, with the
+highest number dropped of each publisher, so that the ingest counts them dropped, and not lost as well.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from overseer.sources.zenoh.keys import attachment_fields
+from overseer.sources.zenoh.receiver import MAX_WAITING_TOKENS
+from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
+
+log = logging.getLogger(__name__)
+
+PAUSE_SECONDS = 0.01  # what a sample may wait for its batch to gather: ~100 a batch at 10,000 a second
+MAX_BATCH = 2_000  # items a batch: a receiver far behind gets its backlog in pieces, not one huge pickle
+
+Deliver = Callable[[list[Item]], bool]  # hands one batch on; False once its receiver is gone
+
+
+class Outbox:
+    """Items waiting for one receiver, and the thread that hands them to `deliver` in batches."""
+
+    def __init__(self, limit: int, deliver: Deliver, name: str) -> None:
+        """Hold up to `limit` samples for `deliver`; `start` starts handing them on."""
+        self._limit = limit
+        self._deliver = deliver
+        self._name = name
+        self._items: list[Item] = []
+        self._samples = 0  # of `_items`
+        self._dropped = 0
+        self._tokens_dropped = 0
+        self._heard: dict[bytes, int] = {}  # the highest number dropped of each publisher
+        self._ready = threading.Condition()
+        self._closed = False
+
+    def start(self) -> None:
+        """Start handing the items on, in a thread of the outbox's own."""
+        threading.Thread(target=self._send_loop, name=self._name, daemon=True).start()
+
+    def put(self, item: Item, attachment: bytes | None = None) -> None:
+        """Queue `item`; a sample beyond the limit is dropped, counted with its `attachment`'s number."""
+        is_sample = item[0] == SAMPLE
+        with self._ready:
+            if self._closed:
+                return
+            if not is_sample and len(self._items) >= self._limit + MAX_WAITING_TOKENS:
+                if not self._tokens_dropped:  # a flood of tokens to a receiver that is stuck
+                    log.warning("the Zenoh ingest is too far behind: tokens dropped from its queue")
+                self._tokens_dropped += 1
+                return
+            if is_sample and self._samples >= self._limit:
+                self._dropped += 1
+                gid, sequence = attachment_fields(attachment)
+                if gid is not None and sequence is not None and len(self._heard) < MAX_WAITING_TOKENS:
+                    self._heard[gid] = max(sequence, self._heard.get(gid, sequence))
+                return
+            self._take_drops()  # they came before this item: the receiver takes them in the same order
+            self._items.append(item)
+            self._samples += is_sample
+            self._ready.notify()
+
+    def close(self) -> None:
+        """Hand nothing more on."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify()
+
+    def _take_drops(self) -> None:
+        """Queue what was dropped since the last item as one item, under `_ready`."""
+        if self._dropped:
+            self._items.append((DROPPED, self._dropped, list(self._heard.items())))
+            self._dropped, self._heard = 0, {}
+
+    def _send_loop(self) -> None:
+        while True:
+            with self._ready:
+                while not self._items and not self._dropped and not self._closed:
+                    self._ready.wait()
+                if self._closed:
+                    return
+                if len(self._items) <= MAX_BATCH:
+                    self._take_drops()  # after every item that waited: they were dropped after those
+                batch = self._items[:MAX_BATCH]
+                del self._items[:MAX_BATCH]
+                self._samples -= sum(1 for item in batch if item[0] == SAMPLE)
+                more = bool(self._items)
+            if not self._deliver(batch):
+                return
+            if not more:
+                time.sleep(PAUSE_SECONDS)  # let the next batch gather rather than hand each sample alone
