@@ -458,3 +458,21 @@ def test_feeds_beyond_the_cap_are_dropped_and_counted() -> None:
     snapshot = model.snapshot()
     assert [feed.name for feed in snapshot.robots[0].feeds] == ["w1", "w2"]
     assert snapshot.dropped_statuses["feed_limit"] == 1
+
+
+def test_one_robots_snapshot_holds_that_robot_as_the_fleets_snapshot_judges_it() -> None:
+    model, clock = make_model(stale_after=5.0, robot_timeout=10.0)
+    steady(model, clock, "r1", status("/a", 1), status("/b", 0))
+    steady(model, clock, "r2", status("/c", 2))
+    clock.now += 7.0  # r1's and r2's components STALE by now, the robots still up
+    model.apply("r2", array(status("/c", 2)), "dds")
+
+    whole = model.snapshot()
+    for name in ("r1", "r2"):
+        alone = model.robot_snapshot(name)
+        assert [robot.name for robot in alone.robots] == [name]
+        robot = alone.robots[0]
+        assert robot is whole.find(name)
+        assert alone.robot_up(robot) == whole.robot_up(robot)
+        assert alone.component_levels(robot, True) == whole.component_levels(robot, True)
+    assert model.robot_snapshot("r3").robots == ()

@@ -121,7 +121,7 @@ class LocalFleet:
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """One robot with every component, or None."""
-        snapshot = self.model.snapshot()
+        snapshot = self.model.robot_snapshot(name)
         robot = snapshot.find(name)
         return None if robot is None else robot_document(snapshot, robot)
 

@@ -496,6 +496,18 @@ class FleetModel:
         if len(forgotten) > _FORGETTINGS_KEPT:
             del forgotten[next(iter(forgotten))]  # the oldest: the detector read it long ago
 
+    def robot_snapshot(self, name: str) -> FleetSnapshot:
+        """A snapshot holding only the robot called `name` (none when unknown), without the fleet's counts.
+
+        What one robot's document needs: a whole snapshot copies every robot and every count (10,000 of
+        each in a large fleet) for a page that shows one.
+        """
+        with self._lock:
+            robot = self._robots.get(name)
+        return FleetSnapshot(
+            self._clock(), self.limits, () if robot is None else (robot,), {}, {}, 0, {}, self._wall_clock()
+        )
+
     def snapshot(self) -> FleetSnapshot:
         """An immutable copy of the fleet, taken now."""
         with self._lock:
