@@ -1,13 +1,14 @@
 """Freed heap memory handed back to the system every minute: glibc keeps it after a backlog drains.
 
 When the ingest falls behind (a fleet heard for the first time, 10,000 robots' first arrays at once),
-Zenoh's receiving threads hold the samples waiting for it, tens of thousands of them, a few kB each.
+the samples waiting for it pile up, tens of thousands of them, a few kB each (`sources/zenoh/outbox.py`).
 Once they are read, the heap they were allocated from stays the process's: glibc returns memory to the
 system only from the top of a heap, and the freed samples lie between the model's live objects. At
 10,000 robots x 50 components over Zenoh (`bench.bench_scale`, one worker) that was 0.4-0.9 kB a
 component more than without the backlog, for good. `malloc_trim` gives every free page back, from
 every thread's heap. It holds each heap's lock while it works on it (56-64 ms in all at that size), so a
-thread allocating meanwhile waits: it runs once a minute, not after every backlog.
+thread allocating meanwhile waits: it runs once a minute, and once a large backlog has drained, not after
+every batch.
 
 glibc also gives each new thread a heap (an arena) of its own, up to eight a core, and the exporter's
 process runs many (Zenoh's, the relay's, the HTTP server's): each keeps what it freed. Two arenas took

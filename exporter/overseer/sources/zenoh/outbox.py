@@ -10,6 +10,7 @@ send (to every subscriber it holds up, not only to this one).
 
 Beyond `limit` samples, a sample is dropped; the drops are queued as one item, in their place, with the
 highest number dropped of each publisher, so that the ingest counts them dropped, and not lost as well.
+Once a large backlog has drained, the heap it took is handed back to the system (`heap_trim.py`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import threading
 import time
 from collections.abc import Callable
 
+from overseer.heap_trim import trim_heap
 from overseer.sources.zenoh.keys import attachment_fields
 from overseer.sources.zenoh.receiver import MAX_WAITING_TOKENS
 from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
@@ -27,6 +29,7 @@ log = logging.getLogger(__name__)
 
 PAUSE_SECONDS = 0.01  # what a sample may wait for its batch to gather: ~100 a batch at 10,000 a second
 MAX_BATCH = 2_000  # items a batch: a receiver far behind gets its backlog in pieces, not one huge pickle
+TRIM_AFTER_BACKLOG = 20_000  # samples once waiting together (~80 MB): their heap is given back once read
 
 Deliver = Callable[[list[Item]], bool]  # hands one batch on; False once its receiver is gone
 
@@ -41,6 +44,7 @@ class Outbox:
         self._name = name
         self._items: list[Item] = []
         self._samples = 0  # of `_items`
+        self._backlog = 0  # the most samples waiting together since the queue was last empty
         self._dropped = 0
         self._tokens_dropped = 0
         self._heard: dict[bytes, int] = {}  # the highest number dropped of each publisher
@@ -71,6 +75,7 @@ class Outbox:
             self._take_drops()  # they came before this item: the receiver takes them in the same order
             self._items.append(item)
             self._samples += is_sample
+            self._backlog = max(self._backlog, self._samples)
             self._ready.notify()
 
     def close(self) -> None:
@@ -98,7 +103,12 @@ class Outbox:
                 del self._items[:MAX_BATCH]
                 self._samples -= sum(1 for item in batch if item[0] == SAMPLE)
                 more = bool(self._items)
+                drained = not more and self._backlog >= TRIM_AFTER_BACKLOG
+                if not more:
+                    self._backlog = 0
             if not self._deliver(batch):
                 return
+            if drained:
+                trim_heap()
             if not more:
                 time.sleep(PAUSE_SECONDS)  # let the next batch gather rather than hand each sample alone
