@@ -1,4 +1,7 @@
-"""The paced drain: every sample handled in order, one wake-up for many while they stream, none when idle."""
+"""The paced drain: every sample handled in order, one wake-up for many while they stream, none when idle.
+
+The buffered drain also empties the source before each share of the work, into a queue of its own.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +9,10 @@ import queue
 import threading
 import time
 
-from overseer.sources.paced_drain import drain_paced
+import pytest
+
+from overseer.sources import paced_drain
+from overseer.sources.paced_drain import drain_buffered, drain_paced
 
 STREAM_ITEMS = 300
 STREAM_GAP_SECONDS = 0.001
@@ -100,3 +106,63 @@ def test_a_stopped_drain_ends_though_items_keep_coming() -> None:
     assert not thread.is_alive()
     assert handled[:50] == list(range(50))
     assert len(handled) < 100
+
+
+def buffered(source: CountedQueue, limit: int, chunk: int) -> tuple[list[tuple[int, int]], list[int]]:
+    """Drain `source` buffered until it is closed: (each item handled, the source's size then), dropped."""
+    handled: list[tuple[int, int]] = []
+    dropped: list[int] = []
+
+    def handle(item: int) -> None:
+        handled.append((item, source.items.qsize()))
+
+    arguments = (source.wait, source.poll, lambda item: item, handle, dropped.append, source.closed.is_set)
+    thread = threading.Thread(target=drain_buffered, args=(*arguments, limit, chunk))
+    thread.start()
+    deadline = time.monotonic() + 10
+    while source.items.qsize() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)  # the last share handled
+    source.close()
+    thread.join(timeout=10)
+    assert not thread.is_alive()
+    return handled, dropped
+
+
+def test_the_buffered_drain_empties_the_source_before_each_share_of_the_work_and_keeps_the_order() -> None:
+    source = CountedQueue()
+    for item in range(250):
+        source.items.put(item)
+    handled, dropped = buffered(source, limit=1000, chunk=100)
+    assert [item for item, _ in handled] == list(range(250))
+    assert dropped == []
+    assert {waiting for _, waiting in handled} == {0}  # nothing left at the source while one was handled
+
+
+def test_the_buffered_drain_drops_what_its_queue_cannot_hold_and_hands_on_the_rest() -> None:
+    source = CountedQueue()
+    for item in range(250):
+        source.items.put(item)
+    handled, dropped = buffered(source, limit=100, chunk=10)
+    assert [item for item, _ in handled] == list(range(100))
+    assert dropped == list(range(100, 250))
+
+
+@pytest.mark.parametrize(("waiting", "trims"), [(60, 1), (40, 0)])
+def test_the_buffered_drain_gives_a_large_backlogs_heap_back_once_it_is_handled(
+    monkeypatch: pytest.MonkeyPatch, waiting: int, trims: int
+) -> None:
+    trimmed: list[int] = []
+
+    def trim() -> bool:
+        trimmed.append(waiting)
+        return True
+
+    monkeypatch.setattr(paced_drain, "TRIM_AFTER_BACKLOG", 50)
+    monkeypatch.setattr(paced_drain, "trim_heap", trim)
+    source = CountedQueue()
+    for item in range(waiting):
+        source.items.put(item)
+    handled, _ = buffered(source, limit=1000, chunk=10)
+    assert len(handled) == waiting
+    assert trimmed == [waiting] * trims

@@ -1,12 +1,11 @@
 """What the exporter's Zenoh session has heard and its ingest has not taken yet: a bounded queue of items.
 
-The session's drain only copies each sample out of Zenoh and queues it here; a thread of the outbox
-hands the items on in batches, in order: to an ingest worker's pipe (`relay.py`), or to the ingest in
-this process (`source.py`). Zenoh's own channel therefore stays short even while the ingest is seconds
-behind (a large fleet's first look). That matters twice: a sample waiting in Zenoh's channel holds the
-whole buffer its link read it into (17 kB a sample of 4 kB, measured at 10,000 robots: 1 GB for a backlog
-of 65,536), and a full channel stops Zenoh from reading the link, so the router drops what it cannot
-send (to every subscriber it holds up, not only to this one).
+With several ingest workers, the session's drain only copies each sample out of Zenoh, finds its worker
+and queues it here; a thread of the outbox sends the items down the worker's pipe in batches, in order
+(`relay.py`). Zenoh's own channel therefore stays short even while a worker is seconds behind (a large
+fleet's first look). That matters twice: a sample waiting in Zenoh's channel holds the whole buffer its
+link read it into (17 kB a sample of 4 kB, measured at 10,000 robots: 1 GB for a backlog of 65,536), and
+a full channel stops Zenoh from reading the link, so the router drops what it cannot send.
 
 Beyond `limit` samples, a sample is dropped; the drops are queued as one item, in their place, with the
 highest number dropped of each publisher, so that the ingest counts them dropped, and not lost as well.
@@ -21,15 +20,14 @@ import time
 from collections.abc import Callable
 
 from overseer.heap_trim import trim_heap
+from overseer.sources.paced_drain import PAUSE_SECONDS, TRIM_AFTER_BACKLOG
 from overseer.sources.zenoh.keys import attachment_fields
 from overseer.sources.zenoh.receiver import MAX_WAITING_TOKENS
 from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
 
 log = logging.getLogger(__name__)
 
-PAUSE_SECONDS = 0.01  # what a sample may wait for its batch to gather: ~100 a batch at 10,000 a second
 MAX_BATCH = 2_000  # items a batch: a receiver far behind gets its backlog in pieces, not one huge pickle
-TRIM_AFTER_BACKLOG = 20_000  # samples once waiting together (~80 MB): their heap is given back once read
 
 Deliver = Callable[[list[Item]], bool]  # hands one batch on; False once its receiver is gone
 

@@ -10,6 +10,8 @@ retried until they are.
 The samples and the tokens queue in channels that Zenoh fills without Python's interpreter lock, and a
 thread of ours drains each: a Python callback would hold Zenoh's receiving thread on the lock for every
 sample or token, so a busy moment in Python would stall the link and the router would drop samples.
+Given `on_dropped`, the samples' thread copies out everything waiting in Zenoh before each share of the
+handler's work, and up to `zenoh.queue_length` copies wait for it (`paced_drain.drain_buffered`).
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ import zenoh
 from zenoh.handlers import FifoChannel
 
 from overseer.config.zenoh import ZenohConfig
-from overseer.sources.paced_drain import drain_paced
+from overseer.sources.paced_drain import drain_buffered, drain_paced
 from overseer.sources.zenoh.ingest import TICK_SECONDS
 from overseer.sources.zenoh.keys import (
     BRIDGE,
     RMW_ZENOH,
+    attachment_fields,
     bridge_liveliness_subscription,
     data_subscriptions,
     liveliness_subscription,
@@ -42,14 +45,17 @@ MAX_WAITING_TOKENS = 200_000  # a fleet's tokens, heard at once (two a robot): b
 
 SampleHandler = Callable[[str, bytes | None, bytes], None]  # key, attachment, payload
 TokenHandler = Callable[[str, bool], None]  # key, alive
+DroppedHandler = Callable[[int, list[tuple[bytes, int]]], None]  # count, the numbers dropped by publisher
+_Copied = tuple[str, bytes | None, bytes]  # what `SampleHandler` is given
 
 
 class ZenohReceiver:
     """Hands every diagnostics sample and publisher token of one Zenoh session to the given handlers.
 
     `on_unreachable` is called at each failed attempt to open the session; `tick` every `TICK_SECONDS`
-    (the ingest's upkeep) while it is open. Handlers are called from the receiver's threads, samples
-    from one thread per subscription, and must not raise.
+    (the ingest's upkeep) while it is open; `on_dropped`, if given, for each sample beyond the
+    samples' queue. Handlers are called from the receiver's threads, samples from one thread per
+    subscription, and must not raise.
     """
 
     def __init__(
@@ -59,6 +65,7 @@ class ZenohReceiver:
         on_token: TokenHandler,
         on_unreachable: Callable[[], None],
         tick: Callable[[], None],
+        on_dropped: DroppedHandler | None = None,
     ) -> None:
         """Prepare the session `config` describes; ConfigError at once if it is unusable."""
         self._config = config
@@ -67,6 +74,7 @@ class ZenohReceiver:
         self._on_token = on_token
         self._on_unreachable = on_unreachable
         self._tick = tick
+        self._on_dropped = on_dropped
         self._lock = threading.Lock()
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
@@ -102,7 +110,10 @@ class ZenohReceiver:
         for key in data_subscriptions(domain, formats):
             subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
             declared.append(subscriber)
-            self._start_drain(subscriber.handler, self._sample, "zenoh-data")
+            if self._on_dropped is None:
+                self._start_drain(subscriber.handler, self._sample, "zenoh-data")
+            else:
+                self._start_buffered_drain(subscriber.handler)
         liveliness = session.liveliness()
         tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
         tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
@@ -142,37 +153,61 @@ class ZenohReceiver:
 
     def _drain(self, channel: Any, handle: Callable[[zenoh.Sample], None]) -> None:
         """Hand every sample of one subscription's channel on, in batches, until it is closed."""
+        drain_paced(*_reads(channel), handle, self._stop.is_set)
 
-        def wait() -> zenoh.Sample | None:
-            try:
-                sample: zenoh.Sample = channel.recv()
-            except zenoh.ZError:  # closed: the subscriber was undeclared
-                return None
-            return sample
+    def _start_buffered_drain(self, channel: Any) -> None:
+        """Copy the samples out of `channel` between shares of their handling, on a thread of its own."""
+        limit = self._config.queue_length
+        arguments = (*_reads(channel), self._copy, self._hand_on, self._drop, self._stop.is_set, limit)
+        threading.Thread(target=drain_buffered, args=arguments, name="zenoh-data", daemon=True).start()
 
-        def poll() -> zenoh.Sample | None:
-            try:
-                sample: zenoh.Sample | None = channel.try_recv()
-            except zenoh.ZError:
-                return None
-            return sample
-
-        drain_paced(wait, poll, handle, self._stop.is_set)
-
-    def _sample(self, sample: zenoh.Sample) -> None:
+    def _copy(self, sample: zenoh.Sample) -> _Copied:
         self.samples_heard += 1
         attachment = sample.attachment
+        return (
+            str(sample.key_expr),
+            None if attachment is None else attachment.to_bytes(),
+            sample.payload.to_bytes(),
+        )
+
+    def _hand_on(self, copied: _Copied) -> None:
         try:
-            self._on_sample(
-                str(sample.key_expr),
-                None if attachment is None else attachment.to_bytes(),
-                sample.payload.to_bytes(),
-            )
+            self._on_sample(*copied)
         except Exception:  # the drain must go on
-            log.exception("failed to hand on a sample of %s", sample.key_expr)
+            log.exception("failed to hand on a sample of %s", copied[0])
+
+    def _drop(self, copied: _Copied) -> None:
+        """Count a sample beyond the queue as dropped, and its number as heard (not lost as well)."""
+        gid, sequence = attachment_fields(copied[1])
+        heard = [(gid, sequence)] if gid is not None and sequence is not None else []
+        if self._on_dropped is not None:
+            self._on_dropped(1, heard)
+
+    def _sample(self, sample: zenoh.Sample) -> None:
+        self._hand_on(self._copy(sample))
 
     def _token(self, sample: zenoh.Sample) -> None:
         try:
             self._on_token(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
         except Exception:  # a callback from Zenoh's threads must never raise
             log.exception("failed to hand on liveliness token %s", sample.key_expr)
+
+
+def _reads(channel: Any) -> tuple[Callable[[], zenoh.Sample | None], Callable[[], zenoh.Sample | None]]:
+    """A channel's blocking and non-blocking reads, each None once the channel is closed."""
+
+    def wait() -> zenoh.Sample | None:
+        try:
+            sample: zenoh.Sample = channel.recv()
+        except zenoh.ZError:  # closed: the subscriber was undeclared
+            return None
+        return sample
+
+    def poll() -> zenoh.Sample | None:
+        try:
+            sample: zenoh.Sample | None = channel.try_recv()
+        except zenoh.ZError:
+            return None
+        return sample
+
+    return wait, poll

@@ -1,7 +1,8 @@
 """The Zenoh transport in one process: robots on rmw_zenoh (ROS 2 Jazzy) and behind zenoh-bridge-ros2dds.
 
-The exporter's session (`receiver.py`) hands every sample and token, through a bounded queue (`outbox.py`:
-Zenoh's own channel stays short while the ingest is behind), to the ingest (`ingest.py`). Payloads
+The exporter's session (`receiver.py`) hands every sample and token to the ingest (`ingest.py`), the
+samples copied out of Zenoh between shares of the ingest's work so that Zenoh's channel stays short
+while the ingest is behind (`paced_drain.drain_buffered`). Payloads
 are DDS CDR and go through the same ingest as DDS samples. rmw_zenoh's liveliness tokens tell when a
 robot's diagnostics publisher goes (process killed, link lost), and so do zenoh-bridge-ros2dds's tokens
 for the routes it serves: the robot is down at once, not after `robot_timeout`.
@@ -19,9 +20,7 @@ from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.ingest import TRANSPORT, ZenohIngest
-from overseer.sources.zenoh.outbox import Outbox
 from overseer.sources.zenoh.receiver import ZenohReceiver
-from overseer.sources.zenoh.relay_items import SAMPLE, TOKEN, Item
 
 
 class ZenohSource:
@@ -39,31 +38,19 @@ class ZenohSource:
         """Feed `model` from the Zenoh network in `config`; ConfigError at once if it is unusable."""
         naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
         self.ingest = ZenohIngest(config, model, shard or Shard(), naming)
-        self._outbox = Outbox(config.queue_length, self._ingest, "zenoh-ingest")
         self.receiver = ZenohReceiver(
             config,
-            self._on_sample,
-            self._on_token,
+            self.ingest.on_sample,
+            self.ingest.on_token,
             lambda: self.ingest.count_source_error("router_unreachable"),
             self.ingest.tick,
+            on_dropped=self.ingest.dropped,
         )
 
     def start(self) -> None:
         """Open the session in the background: routers that are not up yet are retried until they are."""
-        self._outbox.start()
         self.receiver.start()
 
     def stop(self) -> None:
         """Undeclare everything and close the session."""
         self.receiver.stop()
-        self._outbox.close()
-
-    def _on_sample(self, key: str, attachment: bytes | None, payload: bytes) -> None:
-        self._outbox.put((SAMPLE, key, attachment, payload), attachment)
-
-    def _on_token(self, key: str, alive: bool) -> None:
-        self._outbox.put((TOKEN, key, alive))  # in order with the samples: a publisher's go after its last
-
-    def _ingest(self, items: list[Item]) -> bool:
-        self.ingest.on_items(items)
-        return True
