@@ -1,4 +1,4 @@
-"""While the ingest is behind, up to `zenoh.queue_length` samples wait for it; beyond, dropped or lost, counted.
+"""While the ingest is behind, up to `zenoh.queue_length` samples wait for it; beyond, they are counted.
 
 A real router and a Zenoh source in this process, whose ingest the test holds up (as 10,000 robots' first
 arrays hold it up for seconds) while a robot publishes a burst of numbered samples of 5 kB. The samples
