@@ -1,7 +1,8 @@
 """Freed heap memory handed back to the system every minute: glibc keeps it after a backlog drains.
 
 When the ingest falls behind (a fleet heard for the first time, 10,000 robots' first arrays at once),
-the samples waiting for it pile up, tens of thousands of them, a few kB each (`sources/zenoh/outbox.py`).
+the samples waiting for it pile up, tens of thousands of them, a few kB each (`sources/paced_drain.py`,
+`sources/zenoh/outbox.py`).
 Once they are read, the heap they were allocated from stays the process's: glibc returns memory to the
 system only from the top of a heap, and the freed samples lie between the model's live objects. At
 10,000 robots x 50 components over Zenoh (`bench.bench_scale`, one worker) that was 0.4-0.9 kB a

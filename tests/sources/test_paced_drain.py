@@ -13,9 +13,11 @@ import pytest
 
 from overseer.sources import paced_drain
 from overseer.sources.paced_drain import drain_buffered, drain_paced
+from overseer.sources.zenoh.sequence_gaps import SequenceGaps
 
 STREAM_ITEMS = 300
 STREAM_GAP_SECONDS = 0.001
+PUBLISHER = b"publisher"
 
 
 class CountedQueue:
@@ -108,16 +110,30 @@ def test_a_stopped_drain_ends_though_items_keep_coming() -> None:
     assert len(handled) < 100
 
 
-def buffered(source: CountedQueue, limit: int, chunk: int) -> tuple[list[tuple[int, int]], list[int]]:
-    """Drain `source` buffered until it is closed: (each item handled, the source's size then), dropped."""
+def buffered(
+    source: CountedQueue, limit: int, chunk: int, gaps: SequenceGaps | None = None
+) -> tuple[list[tuple[int, int]], list[list[int]]]:
+    """Drain `source` buffered until it is closed: (each item handled, the source's size then), drops.
+
+    With `gaps`, the items are one publisher's numbers: handled ones go through `gaps.missed`, and
+    dropped ones are told to `gaps.heard`, as the Zenoh ingest does.
+    """
     handled: list[tuple[int, int]] = []
-    dropped: list[int] = []
+    dropped: list[list[int]] = []
 
     def handle(item: int) -> None:
         handled.append((item, source.items.qsize()))
+        if gaps is not None:
+            gaps.missed(PUBLISHER, item)
 
-    arguments = (source.wait, source.poll, lambda item: item, handle, dropped.append, source.closed.is_set)
-    thread = threading.Thread(target=drain_buffered, args=(*arguments, limit, chunk))
+    def drop(notes: list[int]) -> None:
+        dropped.append(notes)
+        for number in notes if gaps is not None else []:
+            gaps.heard(PUBLISHER, number)  # type: ignore[union-attr]
+
+    copy, note = (lambda item: item), (lambda item: item)
+    arguments = (source.wait, source.poll, copy, handle, note, drop, source.closed.is_set, limit, chunk)
+    thread = threading.Thread(target=drain_buffered, args=arguments)
     thread.start()
     deadline = time.monotonic() + 10
     while source.items.qsize() and time.monotonic() < deadline:
@@ -145,24 +161,60 @@ def test_the_buffered_drain_drops_what_its_queue_cannot_hold_and_hands_on_the_re
         source.items.put(item)
     handled, dropped = buffered(source, limit=100, chunk=10)
     assert [item for item, _ in handled] == list(range(100))
-    assert dropped == list(range(100, 250))
+    assert dropped == [list(range(100, 250))]  # one run of drops, told once
+
+
+def test_what_the_buffered_drain_dropped_is_told_in_its_place_so_it_is_not_counted_lost_as_well() -> None:
+    gaps = SequenceGaps()
+    source = CountedQueue()
+    for number in range(1, 6):  # a publisher's first numbers while the ingest is behind: 4 and 5 dropped
+        source.items.put(number)
+    handled, dropped = buffered(source, limit=3, chunk=2, gaps=gaps)
+    assert dropped == [[4, 5]]
+    source = CountedQueue()
+    handled_after, _ = buffered(source_with(source, 6), limit=3, chunk=2, gaps=gaps)
+    assert [item for item, _ in handled + handled_after] == [1, 2, 3, 6]
+    assert gaps.lost(PUBLISHER) == 0
+
+
+def source_with(source: CountedQueue, *items: int) -> CountedQueue:
+    """`source` holding `items`."""
+    for item in items:
+        source.items.put(item)
+    return source
+
+
+def test_a_stopped_buffered_drain_leaves_its_backlog() -> None:
+    source = source_with(CountedQueue(), *range(1000))
+    handled: list[int] = []
+
+    def slow(item: int) -> None:
+        handled.append(item)
+        time.sleep(0.01)
+
+    arguments = (source.wait, source.poll, int, slow, int, print, source.closed.is_set, 10_000, 100)
+    thread = threading.Thread(target=drain_buffered, args=arguments)
+    thread.start()
+    time.sleep(0.2)
+    source.closed.set()  # stopped, with hundreds of copies still waiting
+    thread.join(timeout=10)
+    assert not thread.is_alive()
+    assert 0 < len(handled) < 200
 
 
 @pytest.mark.parametrize(("waiting", "trims"), [(60, 1), (40, 0)])
 def test_the_buffered_drain_gives_a_large_backlogs_heap_back_once_it_is_handled(
     monkeypatch: pytest.MonkeyPatch, waiting: int, trims: int
 ) -> None:
-    trimmed: list[int] = []
+    trims_seen: list[None] = []
+    source = source_with(CountedQueue(), *range(waiting))
 
     def trim() -> bool:
-        trimmed.append(waiting)
+        trims_seen.append(None)
         return True
 
     monkeypatch.setattr(paced_drain, "TRIM_AFTER_BACKLOG", 50)
     monkeypatch.setattr(paced_drain, "trim_heap", trim)
-    source = CountedQueue()
-    for item in range(waiting):
-        source.items.put(item)
     handled, _ = buffered(source, limit=1000, chunk=10)
     assert len(handled) == waiting
-    assert trimmed == [waiting] * trims
+    assert len(trims_seen) == trims  # once the backlog was handled, not after each share of it

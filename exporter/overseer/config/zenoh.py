@@ -101,8 +101,9 @@ OPTIONS: tuple[Option, ...] = (
         "zenoh.queue_length",
         f"{DEFAULT_QUEUE_LENGTH}",
         "samples that may wait for the ingest while it is behind, as in a large fleet's first seconds: "
-        "copied out of Zenoh between shares of the ingest's work, they wait for it (for each ingest "
-        "worker's, with several), and beyond it are dropped and counted as dropped. Each holds its "
+        "copied out of Zenoh between shares of the ingest's work, they wait for it (per data "
+        "subscription of the session, two per key format; per ingest worker, with several), and beyond "
+        "it are dropped and counted as dropped. Each holds its "
         "payload while it waits (about 4 kB at 50 components): the memory it may take is this many times "
         "the largest sample. Zenoh's own channel of each subscription has the same bound (beyond it the "
         "router drops what does not fit, counted as lost where rmw_zenoh numbers it), but is kept short",

@@ -504,9 +504,8 @@ class FleetModel:
         """
         with self._lock:
             robot = self._robots.get(name)
-        return FleetSnapshot(
-            self._clock(), self.limits, () if robot is None else (robot,), {}, {}, 0, {}, self._wall_clock()
-        )
+        robots = () if robot is None else (robot,)
+        return FleetSnapshot(self._clock(), self.limits, robots, generated_at=self._wall_clock())
 
     def snapshot(self) -> FleetSnapshot:
         """An immutable copy of the fleet, taken now."""

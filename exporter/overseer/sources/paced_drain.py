@@ -17,15 +17,17 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Generic, TypeVar
 
 from overseer.heap_trim import trim_heap
 
 Item = TypeVar("Item")
 Copied = TypeVar("Copied")
+Note = TypeVar("Note")
 
 PAUSE_SECONDS = 0.01  # what a sample may wait for its batch; at 10,000 messages a second, ~100 a batch
 CHUNK = 100  # items handled between two looks at the source (0.1 s of a large fleet's first arrays)
+SWEEP_LIMIT = 5_000  # items taken from the source at most between two shares of the work
 TRIM_AFTER_BACKLOG = 20_000  # items once waiting together (~80 MB of samples): their heap is given back
 
 
@@ -51,45 +53,66 @@ def drain_paced(
                 item = poll()
 
 
+class _Dropped(Generic[Note]):
+    """Where items were dropped in the queue, with a note of each: handled in their place, in order."""
+
+    __slots__ = ("notes",)
+
+    def __init__(self, note: Note) -> None:
+        self.notes = [note]
+
+
 def drain_buffered(
     wait: Callable[[], Item | None],
     poll: Callable[[], Item | None],
-    copy: Callable[[Item], Copied],
+    copy: Callable[[Item], Copied | None],
     handle: Callable[[Copied], None],
-    drop: Callable[[Copied], None],
+    note: Callable[[Item], Note],
+    drop: Callable[[list[Note]], None],
     stopped: Callable[[], bool],
     limit: int,
     chunk: int = CHUNK,
     pause: float = PAUSE_SECONDS,
 ) -> None:
-    """As `drain_paced`, but everything waiting at the source is copied out before each `chunk` handled.
+    """As `drain_paced`, but what waits at the source is copied out (None: left out) before each `chunk`.
 
-    The copies wait in a queue of this thread's, up to `limit`; beyond it they go to `drop` at once.
-    One thread both takes and handles: a second thread taking would wait for the interpreter lock after
-    every item, since the source lets go of it for each one. Once a backlog of `TRIM_AFTER_BACKLOG` or
-    more has been handled, the heap it took is handed back to the system.
+    The copies wait in a queue of this thread's, up to `limit`; an item beyond it is not copied but noted,
+    and `drop` is given the notes of a run of drops where they came, after the copies before them (so
+    that a publisher's numbers are told in order). One thread both takes and handles: a second thread
+    taking would wait for the interpreter lock after every item, since the source lets go of it for
+    each. Once a backlog of `TRIM_AFTER_BACKLOG` or more has been handled, its heap is handed back.
     """
-    waiting: deque[Copied] = deque()
+    waiting: deque[Copied | _Dropped[Note]] = deque()
     backlog = 0
 
     def take(item: Item) -> None:
-        copied = copy(item)
         if len(waiting) < limit:
-            waiting.append(copied)
+            copied = copy(item)
+            if copied is not None:
+                waiting.append(copied)
+        elif isinstance(last := waiting[-1], _Dropped):
+            last.notes.append(note(item))
         else:
-            drop(copied)
+            waiting.append(_Dropped(note(item)))
 
-    def sweep() -> None:
-        while (item := poll()) is not None:
+    def sweep() -> None:  # a bounded share: a source that never empties must not starve the handling
+        for _ in range(SWEEP_LIMIT):
+            item = poll()
+            if item is None:
+                return
             take(item)
 
     while not stopped() and (item := wait()) is not None:
         take(item)
-        while waiting:
+        while waiting and not stopped():
             sweep()
             backlog = max(backlog, len(waiting))
             for _ in range(min(chunk, len(waiting))):
-                handle(waiting.popleft())
+                entry = waiting.popleft()
+                if isinstance(entry, _Dropped):
+                    drop(entry.notes)
+                else:
+                    handle(entry)
             if not waiting:
                 if backlog >= TRIM_AFTER_BACKLOG:
                     trim_heap()

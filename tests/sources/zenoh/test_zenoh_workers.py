@@ -174,7 +174,7 @@ def test_samples_beyond_what_may_wait_for_a_worker_are_dropped_and_counted_not_l
 
 def test_a_flood_of_tokens_to_a_worker_that_is_stuck_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(relay_module, "MAX_LIVE_TOKENS", 10)
-    monkeypatch.setattr(outbox_module, "MAX_WAITING_TOKENS", 10)
+    monkeypatch.setattr(outbox_module, "MAX_TOKENS", 10)
     relay = ZenohRelay(ZenohConfig(enabled=True, queue_length=5), Shard(), 1)
     _, writer = multiprocessing.Pipe(duplex=False)  # nothing ever reads it: a worker that is stuck
     relay.attach(0, writer)

@@ -138,6 +138,24 @@ class ZenohIngest:
         for gid, sequence in heard:
             self._gaps.heard(gid, sequence)
 
+    def dropped_samples(self, samples: list[tuple[str, bytes | None]]) -> None:
+        """Samples (key, attachment) dropped before they reached this ingest (a full queue), in order.
+
+        Those of its own robots (or of a robot not known yet) are counted dropped, and their numbers
+        heard: they are not counted lost as well.
+        """
+        count = 0
+        for key, attachment in samples:
+            parsed, _ = self._keys.get(key) or self._read_key(key)
+            if parsed is None:
+                continue  # another shard's robot, or not a robot's diagnostics
+            count += 1
+            gid, sequence = attachment_fields(attachment)
+            if gid is not None and sequence is not None:
+                self._gaps.heard(gid, sequence)
+        if count:
+            self._model.count_message(TRANSPORT, "dropped", count)
+
     def _apply(self, key: str, attachment: bytes | None, payload: bytes) -> None:
         parsed, robot = self._keys.get(key) or self._read_key(key)
         if parsed is None:

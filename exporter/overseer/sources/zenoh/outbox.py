@@ -22,11 +22,11 @@ from collections.abc import Callable
 from overseer.heap_trim import trim_heap
 from overseer.sources.paced_drain import PAUSE_SECONDS, TRIM_AFTER_BACKLOG
 from overseer.sources.zenoh.keys import attachment_fields
-from overseer.sources.zenoh.receiver import MAX_WAITING_TOKENS
 from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
 
 log = logging.getLogger(__name__)
 
+MAX_TOKENS = 200_000  # tokens that may wait beyond the samples (a fleet's, two a robot), publishers noted
 MAX_BATCH = 2_000  # items a batch: a receiver far behind gets its backlog in pieces, not one huge pickle
 
 Deliver = Callable[[list[Item]], bool]  # hands one batch on; False once its receiver is gone
@@ -59,7 +59,7 @@ class Outbox:
         with self._ready:
             if self._closed:
                 return
-            if not is_sample and len(self._items) >= self._limit + MAX_WAITING_TOKENS:
+            if not is_sample and len(self._items) >= self._limit + MAX_TOKENS:
                 if not self._tokens_dropped:  # a flood of tokens to a receiver that is stuck
                     log.warning("the Zenoh ingest is too far behind: tokens dropped from its queue")
                 self._tokens_dropped += 1
@@ -67,7 +67,7 @@ class Outbox:
             if is_sample and self._samples >= self._limit:
                 self._dropped += 1
                 gid, sequence = attachment_fields(attachment)
-                if gid is not None and sequence is not None and len(self._heard) < MAX_WAITING_TOKENS:
+                if gid is not None and sequence is not None and len(self._heard) < MAX_TOKENS:
                     self._heard[gid] = max(sequence, self._heard.get(gid, sequence))
                 return
             self._take_drops()  # they came before this item: the receiver takes them in the same order

@@ -30,7 +30,6 @@ from overseer.sources.zenoh.ingest import TICK_SECONDS
 from overseer.sources.zenoh.keys import (
     BRIDGE,
     RMW_ZENOH,
-    attachment_fields,
     bridge_liveliness_subscription,
     data_subscriptions,
     liveliness_subscription,
@@ -45,7 +44,8 @@ MAX_WAITING_TOKENS = 200_000  # a fleet's tokens, heard at once (two a robot): b
 
 SampleHandler = Callable[[str, bytes | None, bytes], None]  # key, attachment, payload
 TokenHandler = Callable[[str, bool], None]  # key, alive
-DroppedHandler = Callable[[int, list[tuple[bytes, int]]], None]  # count, the numbers dropped by publisher
+DroppedSample = tuple[str, bytes | None]  # key, attachment
+DroppedHandler = Callable[[list[DroppedSample]], None]  # samples dropped in a row, in order
 _Copied = tuple[str, bytes | None, bytes]  # what `SampleHandler` is given
 
 
@@ -53,9 +53,9 @@ class ZenohReceiver:
     """Hands every diagnostics sample and publisher token of one Zenoh session to the given handlers.
 
     `on_unreachable` is called at each failed attempt to open the session; `tick` every `TICK_SECONDS`
-    (the ingest's upkeep) while it is open; `on_dropped`, if given, for each sample beyond the
-    samples' queue. Handlers are called from the receiver's threads, samples from one thread per
-    subscription, and must not raise.
+    (the ingest's upkeep) while it is open; `on_dropped`, if given, with the samples beyond the
+    samples' queue, where they came among the others. Handlers are called from the receiver's
+    threads, samples from one thread per subscription, and must not raise.
     """
 
     def __init__(
@@ -158,17 +158,19 @@ class ZenohReceiver:
     def _start_buffered_drain(self, channel: Any) -> None:
         """Copy the samples out of `channel` between shares of their handling, on a thread of its own."""
         limit = self._config.queue_length
-        arguments = (*_reads(channel), self._copy, self._hand_on, self._drop, self._stop.is_set, limit)
+        handlers = (self._copy, self._hand_on, self._note, self._drop)
+        arguments = (*_reads(channel), *handlers, self._stop.is_set, limit)
         threading.Thread(target=drain_buffered, args=arguments, name="zenoh-data", daemon=True).start()
 
-    def _copy(self, sample: zenoh.Sample) -> _Copied:
+    def _copy(self, sample: zenoh.Sample) -> _Copied | None:
         self.samples_heard += 1
-        attachment = sample.attachment
-        return (
-            str(sample.key_expr),
-            None if attachment is None else attachment.to_bytes(),
-            sample.payload.to_bytes(),
-        )
+        try:
+            attachment = sample.attachment
+            key = str(sample.key_expr)
+            return key, None if attachment is None else attachment.to_bytes(), sample.payload.to_bytes()
+        except Exception:  # the drain must go on
+            log.exception("failed to read a sample")
+            return None
 
     def _hand_on(self, copied: _Copied) -> None:
         try:
@@ -176,15 +178,28 @@ class ZenohReceiver:
         except Exception:  # the drain must go on
             log.exception("failed to hand on a sample of %s", copied[0])
 
-    def _drop(self, copied: _Copied) -> None:
-        """Count a sample beyond the queue as dropped, and its number as heard (not lost as well)."""
-        gid, sequence = attachment_fields(copied[1])
-        heard = [(gid, sequence)] if gid is not None and sequence is not None else []
-        if self._on_dropped is not None:
-            self._on_dropped(1, heard)
+    def _note(self, sample: zenoh.Sample) -> DroppedSample:
+        """What the ingest needs of a sample it will not get: its key and its attachment (its number)."""
+        self.samples_heard += 1
+        try:
+            attachment = sample.attachment
+            return str(sample.key_expr), None if attachment is None else attachment.to_bytes()
+        except Exception:  # the drain must go on
+            log.exception("failed to read a sample")
+            return "", None
+
+    def _drop(self, samples: list[DroppedSample]) -> None:
+        if self._on_dropped is None:
+            return
+        try:
+            self._on_dropped(samples)
+        except Exception:  # the drain must go on
+            log.exception("failed to count %d dropped samples", len(samples))
 
     def _sample(self, sample: zenoh.Sample) -> None:
-        self._hand_on(self._copy(sample))
+        copied = self._copy(sample)
+        if copied is not None:
+            self._hand_on(copied)
 
     def _token(self, sample: zenoh.Sample) -> None:
         try:

@@ -44,7 +44,7 @@ class ZenohSource:
             self.ingest.on_token,
             lambda: self.ingest.count_source_error("router_unreachable"),
             self.ingest.tick,
-            on_dropped=self.ingest.dropped,
+            on_dropped=self.ingest.dropped_samples,
         )
 
     def start(self) -> None:
