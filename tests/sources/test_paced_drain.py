@@ -146,9 +146,7 @@ def buffered(
 
 
 def test_the_buffered_drain_empties_the_source_before_each_share_of_the_work_and_keeps_the_order() -> None:
-    source = CountedQueue()
-    for item in range(250):
-        source.items.put(item)
+    source = source_with(CountedQueue(), *range(250))
     handled, dropped = buffered(source, limit=1000, chunk=100)
     assert [item for item, _ in handled] == list(range(250))
     assert dropped == []
@@ -156,9 +154,7 @@ def test_the_buffered_drain_empties_the_source_before_each_share_of_the_work_and
 
 
 def test_the_buffered_drain_drops_what_its_queue_cannot_hold_and_hands_on_the_rest() -> None:
-    source = CountedQueue()
-    for item in range(250):
-        source.items.put(item)
+    source = source_with(CountedQueue(), *range(250))
     handled, dropped = buffered(source, limit=100, chunk=10)
     assert [item for item, _ in handled] == list(range(100))
     assert dropped == [list(range(100, 250))]  # one run of drops, told once
@@ -166,13 +162,10 @@ def test_the_buffered_drain_drops_what_its_queue_cannot_hold_and_hands_on_the_re
 
 def test_what_the_buffered_drain_dropped_is_told_in_its_place_so_it_is_not_counted_lost_as_well() -> None:
     gaps = SequenceGaps()
-    source = CountedQueue()
-    for number in range(1, 6):  # a publisher's first numbers while the ingest is behind: 4 and 5 dropped
-        source.items.put(number)
+    source = source_with(CountedQueue(), *range(1, 6))  # a publisher's first numbers, the ingest behind
     handled, dropped = buffered(source, limit=3, chunk=2, gaps=gaps)
     assert dropped == [[4, 5]]
-    source = CountedQueue()
-    handled_after, _ = buffered(source_with(source, 6), limit=3, chunk=2, gaps=gaps)
+    handled_after, _ = buffered(source_with(CountedQueue(), 6), limit=3, chunk=2, gaps=gaps)
     assert [item for item, _ in handled + handled_after] == [1, 2, 3, 6]
     assert gaps.lost(PUBLISHER) == 0
 
