@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import sys
 import threading
@@ -64,6 +65,8 @@ def print_table(rows: Iterable[Row], file: TextIO | None = None) -> None:
 
 
 def _number(value: float) -> str:
+    if not math.isfinite(value):
+        return str(value)  # a figure the run could not measure (a first look that never ended)
     if value == int(value) and abs(value) < 1e15:
         return f"{int(value):,}"
     return f"{value:,.3g}" if abs(value) < 10 else f"{value:,.1f}"
