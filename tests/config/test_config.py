@@ -92,10 +92,6 @@ def test_flags_override_the_file(tmp_path: Path) -> None:
             "zenoh:\n  queue_length: 0\n",
             "zenoh.queue_length: expected a number of samples from 1 to 10000000, got 0",
         ),
-        (
-            "zenoh:\n  ingest_niceness: 20\n",
-            "zenoh.ingest_niceness: expected a number of nice levels from 0 to 19, got 20",
-        ),
         ("- a list\n", "expected a mapping at the top"),
         ("fleet: [\n", "is not valid YAML"),
     ],

@@ -10,14 +10,12 @@ from typing import Any
 from overseer.config.errors import ConfigError
 from overseer.config.options import Option, option
 from overseer.config.parsers import boolean, listed, string, whole_number
-from overseer.thread_priority import LOWEST_PRIORITY
 
 ZENOH_MODES = ("client", "peer")
 ZENOH_KEY_FORMATS = ("rmw_zenoh", "bridge")
 _ZENOH_ENDPOINT = re.compile(r"[a-z][a-z0-9-]*/\S+")
 DEFAULT_QUEUE_LENGTH = 131_072  # 13 s of 10,000 robots at 1 Hz, their first look's backlog (~4 kB each)
 MAX_QUEUE_LENGTH = 10_000_000
-DEFAULT_INGEST_NICENESS = 10  # under contention about a tenth of the share of Zenoh's reading threads
 
 
 @dataclass(frozen=True)
@@ -35,7 +33,6 @@ class ZenohConfig:
     multicast_scouting: bool = False
     queue_length: int = DEFAULT_QUEUE_LENGTH  # samples waiting (a subscription's; a worker's, relayed)
     shared_memory: bool = False  # take part in Zenoh's shared memory with sessions on the same host
-    ingest_niceness: int = DEFAULT_INGEST_NICENESS  # nice levels the ingest's thread is lowered by
 
     @property
     def unnamespaced_robot(self) -> str:
@@ -121,16 +118,6 @@ OPTIONS: tuple[Option, ...] = (
         "the sender's buffers",
         metavar="BOOL",
     ),
-    option(
-        "zenoh.ingest_niceness",
-        f"{DEFAULT_INGEST_NICENESS}",
-        "nice levels (0 to 19) the thread that ingests the samples runs below the exporter's others (in "
-        "each worker, with several): when the machine has no core to spare, as in a large fleet's first "
-        "look, Zenoh's threads read the router's link first and the samples wait in the exporter's queue "
-        "(zenoh.queue_length) instead of being dropped by the router. On an idle machine it changes "
-        "nothing; 0 runs the ingest as the others",
-        metavar="N",
-    ),
 )
 KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
@@ -187,11 +174,4 @@ def zenoh_config(raw: dict[str, Any]) -> ZenohConfig:
         ),
         queue_length=queue_length,
         shared_memory=boolean(raw.get("shared_memory", defaults.shared_memory), "zenoh.shared_memory"),
-        ingest_niceness=whole_number(
-            raw.get("ingest_niceness", defaults.ingest_niceness),
-            "zenoh.ingest_niceness",
-            0,
-            LOWEST_PRIORITY,
-            "a number of nice levels",
-        ),
     )

@@ -11,9 +11,7 @@ The samples and the tokens queue in channels that Zenoh fills without Python's i
 thread of ours drains each: a Python callback would hold Zenoh's receiving thread on the lock for every
 sample or token, so a busy moment in Python would stall the link and the router would drop samples.
 Given `on_dropped`, the samples' thread copies out everything waiting in Zenoh before each share of the
-handler's work, and up to `zenoh.queue_length` copies wait for it (`paced_drain.drain_buffered`); that
-thread runs `zenoh.ingest_niceness` nice levels lower, so that on a machine with no core to spare Zenoh's
-threads read the link before it ingests (`thread_priority.py`).
+handler's work, and up to `zenoh.queue_length` copies wait for it (`paced_drain.drain_buffered`).
 """
 
 from __future__ import annotations
@@ -37,7 +35,6 @@ from overseer.sources.zenoh.keys import (
     liveliness_subscription,
 )
 from overseer.sources.zenoh.session import session_config
-from overseer.thread_priority import lower_thread_priority
 
 log = logging.getLogger(__name__)
 
@@ -160,16 +157,10 @@ class ZenohReceiver:
 
     def _start_buffered_drain(self, channel: Any) -> None:
         """Copy the samples out of `channel` between shares of their handling, on a thread of its own."""
-        threading.Thread(target=self._drain_buffered, args=(channel,), name="zenoh-data", daemon=True).start()
-
-    def _drain_buffered(self, channel: Any) -> None:
-        """Ingest at the configured lower priority: Zenoh's threads read the link first."""
-        lower_thread_priority(self._config.ingest_niceness)
-        wait, poll = _reads(channel)
         limit = self._config.queue_length
-        drain_buffered(
-            wait, poll, self._copy, self._hand_on, self._note, self._drop, self._stop.is_set, limit
-        )
+        handlers = (self._copy, self._hand_on, self._note, self._drop)
+        arguments = (*_reads(channel), *handlers, self._stop.is_set, limit)
+        threading.Thread(target=drain_buffered, args=arguments, name="zenoh-data", daemon=True).start()
 
     def _copy(self, sample: zenoh.Sample) -> _Copied | None:
         self.samples_heard += 1

@@ -18,7 +18,6 @@ from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.ingest import TICK_SECONDS, TRANSPORT, ZenohIngest
 from overseer.sources.zenoh.relay_items import decode_batch
-from overseer.thread_priority import lower_thread_priority
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +40,6 @@ class RelayedZenohSource:
         # The relay sends what every worker would see alike (a bad key, an unreachable router) to the first.
         self.ingest = ZenohIngest(config, model, shard, naming, counts_shared_errors=shard.worker == 0)
         self._connection = connection
-        self._niceness = config.ingest_niceness
         self.samples_heard = 0  # samples the relay sent this worker
         self._stop = threading.Event()
 
@@ -55,7 +53,6 @@ class RelayedZenohSource:
         self._stop.set()
 
     def _read(self) -> None:
-        lower_thread_priority(self._niceness)  # the relay's threads, which read the link, come first
         ingest = self.ingest
         while not self._stop.is_set():
             try:
