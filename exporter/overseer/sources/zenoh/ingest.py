@@ -144,17 +144,15 @@ class ZenohIngest:
         Those of its own robots (or of a robot not known yet) are counted dropped, and their numbers
         heard: they are not counted lost as well.
         """
-        count = 0
-        for key, attachment in samples:
-            parsed, _ = self._keys.get(key) or self._read_key(key)
-            if parsed is None:
-                continue  # another shard's robot, or not a robot's diagnostics
-            count += 1
-            gid, sequence = attachment_fields(attachment)
-            if gid is not None and sequence is not None:
-                self._gaps.heard(gid, sequence)
-        if count:
-            self._model.count_message(TRANSPORT, "dropped", count)
+        ours = [attachment for key, attachment in samples if self._is_ours(key)]
+        if ours:
+            numbers = [attachment_fields(attachment) for attachment in ours]
+            self.dropped(len(ours), [(gid, n) for gid, n in numbers if gid is not None and n is not None])
+
+    def _is_ours(self, key: str) -> bool:
+        """Whether `key` is a robot's diagnostics this ingest follows (or a robot not known yet)."""
+        parsed, _ = self._keys.get(key) or self._read_key(key)
+        return parsed is not None
 
     def _apply(self, key: str, attachment: bytes | None, payload: bytes) -> None:
         parsed, robot = self._keys.get(key) or self._read_key(key)
