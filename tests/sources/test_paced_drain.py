@@ -128,8 +128,9 @@ def buffered(
 
     def drop(notes: list[int]) -> None:
         dropped.append(notes)
-        for number in notes if gaps is not None else []:
-            gaps.heard(PUBLISHER, number)  # type: ignore[union-attr]
+        if gaps is not None:
+            for number in notes:
+                gaps.heard(PUBLISHER, number)
 
     copy, note = (lambda item: item), (lambda item: item)
     arguments = (source.wait, source.poll, copy, handle, note, drop, source.closed.is_set, limit, chunk)
