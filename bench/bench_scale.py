@@ -43,7 +43,7 @@ import statistics
 import tempfile
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -54,7 +54,7 @@ from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, stati
 from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
-from bench.loadgen import add_shape_arguments, running_loadgen, shape_arguments, shape_of
+from bench.loadgen import add_shape_arguments, check_shape, running_loadgen, shape_arguments, shape_of
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
@@ -486,7 +486,35 @@ def run(
     ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
 
 
-def main() -> None:
+def positive_counts(flag: str, text: str) -> list[int]:
+    """`text`'s comma-separated whole numbers, each at least 1; ValueError naming `flag` otherwise."""
+    counts = []
+    for part in text.split(","):
+        try:
+            count = int(part)
+        except ValueError:
+            raise ValueError(f"{flag}: expected comma-separated whole numbers, got {text!r}") from None
+        if count < 1:
+            raise ValueError(f"{flag}: each must be at least 1, got {count}")
+        counts.append(count)
+    return counts
+
+
+def check_window(options: argparse.Namespace) -> None:
+    """ValueError naming the first of the run's lengths that cannot measure anything."""
+    if not options.seconds > 0:
+        raise ValueError(f"--seconds: must be positive, got {options.seconds}")
+    if not options.prometheus_seconds >= 0:
+        raise ValueError(f"--prometheus-seconds: must not be negative, got {options.prometheus_seconds}")
+    if options.scrape_interval < 1:
+        raise ValueError(f"--scrape-interval: must be at least 1 s, got {options.scrape_interval}")
+    if options.rules and not options.prometheus_seconds:
+        raise ValueError("--rules: needs --prometheus-seconds (the rules run in that Prometheus)")
+    if options.floor and options.transport != ZENOH:
+        raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
+
+
+def main(argv: Sequence[str] | None = None) -> None:
     """Every size x worker count asked for, one after the other."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="1000", help="comma-separated fleet sizes (default 1000)")
@@ -517,10 +545,17 @@ def main() -> None:
         help="then Chromium loads the status page, the JSON API and event history are read, under traffic",
     )
     add_shape_arguments(parser)
-    options = parser.parse_args()
+    options = parser.parse_args(argv)
+    try:  # before any server starts: a run refused after minutes of setup measures nothing
+        sizes = positive_counts("--robots", options.robots)
+        worker_counts = positive_counts("--workers", options.workers)
+        check_shape(options)
+        check_window(options)
+    except ValueError as error:
+        parser.error(str(error))
     rows: list[Row] = []
-    for robots in [int(size) for size in options.robots.split(",")]:
-        for workers in [int(count) for count in options.workers.split(",")]:
+    for robots in sizes:
+        for workers in worker_counts:
             rows += run(
                 shape_of(options, robots),
                 workers,

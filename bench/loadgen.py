@@ -306,18 +306,9 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
     """The run the arguments ask for; ValueError naming the first bad argument."""
     if args.robots < 1:
         raise ValueError(f"--robots: must be at least 1, got {args.robots}")
-    try:
-        leaf_count(args.components)
-    except ValueError as error:
-        raise ValueError(f"--components: {error}") from None
+    check_shape(args)
     if args.robots_per_session < 1:
         raise ValueError(f"--robots-per-session: must be at least 1, got {args.robots_per_session}")
-    if not args.rate > 0:
-        raise ValueError(f"--rate: must be positive, got {args.rate}")
-    for name in ("change_share", "trouble_share", "down_share"):
-        if not 0.0 <= getattr(args, name) <= 1.0:
-            flag = "--" + name.replace("_", "-")
-            raise ValueError(f"{flag}: expected a share from 0 to 1, got {getattr(args, name)}")
     if not _ROS_NAMESPACE.fullmatch(args.namespace_prefix):
         raise ValueError(f"--namespace-prefix: expected ROS name tokens, got {args.namespace_prefix!r}")
     return LoadSettings(
@@ -336,6 +327,22 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
         wait_for_subscribers=args.wait_for_subscribers,
         ready_file=args.ready_file,
     )
+
+
+def check_shape(args: argparse.Namespace) -> None:
+    """ValueError naming the first of `add_shape_arguments`' arguments the generator would refuse."""
+    try:
+        leaf_count(args.components)
+    except ValueError as error:
+        raise ValueError(f"--components: {error}") from None
+    if not args.rate > 0:
+        raise ValueError(f"--rate: must be positive, got {args.rate}")
+    for name in ("change_share", "trouble_share", "down_share"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag}: expected a share from 0 to 1, got {getattr(args, name)}")
+    if not args.down_seconds >= 0:
+        raise ValueError(f"--down-seconds: must not be negative, got {args.down_seconds}")
 
 
 def shape_of(args: argparse.Namespace, robots: int) -> FleetShape:

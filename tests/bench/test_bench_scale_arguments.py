@@ -1,0 +1,32 @@
+"""`bench_scale` refuses a run it cannot measure before it starts any server, naming the flag."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.bench_scale import main
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--components=3"], "--components: 3 components"),
+        (["--robots=1000,10k"], "--robots: expected comma-separated whole numbers, got '1000,10k'"),
+        (["--robots=0"], "--robots: each must be at least 1, got 0"),
+        (["--workers=1,0"], "--workers: each must be at least 1, got 0"),
+        (["--rate=0"], "--rate: must be positive, got 0.0"),
+        (["--trouble-share=1.5"], "--trouble-share: expected a share from 0 to 1, got 1.5"),
+        (["--down-seconds=-1"], "--down-seconds: must not be negative, got -1.0"),
+        (["--seconds=0"], "--seconds: must be positive, got 0.0"),
+        (["--scrape-interval=0"], "--scrape-interval: must be at least 1 s, got 0"),
+        (["--rules"], "--rules: needs --prometheus-seconds"),
+        (["--floor", "--transport=dds"], "--floor: its counting subscriber hears the fleet through"),
+    ],
+)
+def test_a_run_that_cannot_be_measured_is_refused_with_the_flag_named(
+    arguments: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as refused:
+        main(arguments)
+    assert refused.value.code == 2
+    assert message in capsys.readouterr().err
