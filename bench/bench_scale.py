@@ -58,12 +58,14 @@ from bench.loadgen import add_shape_arguments, check_shape, running_loadgen, sha
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
+from overseer.model.state import FleetLimits
 from testbed.browser import headless_chromium
 from testbed.ports import fresh_domain_id
 from testbed.processes import RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
+DEFAULT_MAX_ROBOTS = FleetLimits().max_robots
 SETTLE_SECONDS = 4.0  # after the generator stops, for the last samples to be counted
 FLOOR_RATIO = 1.3  # Prometheus's scrape of the exporter against its scrape of the same bytes served static
 RULE_SHARE_SHOWN = 0.5  # % of the group's interval: the rules that cost at least this get a row
@@ -83,6 +85,7 @@ class Counts(NamedTuple):
     events_dropped: float
     renders_ahead: float  # of the series, shortly before a scrape expected (metrics.render_ahead)
     render_ahead_seconds: float  # how long the last took
+    over_cap: float  # statuses dropped because their robot was beyond its worker's share of the robot cap
 
 
 def counted(url: str, transport: str) -> Counts:
@@ -103,6 +106,7 @@ def counted(url: str, transport: str) -> Counts:
         total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
         total(r'overseer_exposition_renders_ahead_total\{result="done"\}'),
         total("overseer_exposition_render_ahead_seconds"),
+        total(r'overseer_statuses_dropped_total\{reason="robot_limit"\}'),
     )
 
 
@@ -358,7 +362,9 @@ def run(
             wires.domain,
             *wires.exporter_args,
             f"--ingest.workers={workers}",
-            f"--fleet.max-robots={2 * robots}",  # the cap is shared out by hash: headroom, not a limit
+            # The cap is shared out between the workers by hash: headroom, not a limit (a tiny fleet and
+            # its probe robot on four workers overfilled a cap of twice the fleet).
+            f"--fleet.max-robots={max(DEFAULT_MAX_ROBOTS, 2 * robots)}",
             "--log.level=warning",
             *exporter_options,
         ) as exporter,
@@ -418,6 +424,14 @@ def run(
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
+        Row(
+            "scale",
+            f"{label}: statuses dropped beyond fleet.max_robots",
+            counts.over_cap,
+            "statuses",
+            "0",
+            counts.over_cap == 0,
+        ),
         *(
             [
                 Row(

@@ -67,3 +67,19 @@ def test_the_status_page_and_the_api_are_timed_while_the_fleet_goes_on_publishin
     assert 0 < robots.value < 10_000 and robots.unit == "ms"
     assert 0 < row("GET /api/v1/events?limit=100 (the newest events)").value < 10_000
     assert row("lost updates").value == 0  # the generator was stopped, not cut off, after the page
+
+
+def test_a_tiny_fleet_on_four_workers_is_heard_whole_with_its_probe_robot() -> None:
+    # The robot cap is shared out between the workers by hash: twice the fleet (4) left each worker one
+    # robot, and the fleet's two robots and the probe did not fit.
+    shape = FleetShape(robots=2, components=COMPONENTS)
+    rows = {row.figure: row for row in run(shape, workers=4, seconds=SECONDS / 2)}
+    label = "2 robots x 20, realistic, zenoh, 4 workers"
+
+    def row(figure: str) -> Row:
+        return rows[f"{label}: {figure}"]
+
+    assert row("statuses dropped beyond fleet.max_robots").value == 0
+    assert row("statuses dropped beyond fleet.max_robots").met
+    assert row("lost updates").value == 0
+    assert row("changes timed").value >= SECONDS / 4  # the probe robot was followed
