@@ -118,8 +118,8 @@ class ChangeProbe:
             latency
             for sent, latency in zip(self.sent_at, self.latencies, strict=True)
             if sent - self.started_at >= first_look
-        ) or [float("nan")]
-        p99, steady_p99 = percentile(ordered, 0.99), percentile(steady, 0.99)
+        )
+        p99, steady_p99 = percentile(ordered, 0.99), percentile(steady or [float("nan")], 0.99)
         return [
             Row("scale", f"{label}: a change to /metrics, median", statistics.median(ordered), "s"),
             Row("scale", f"{label}: a change to /metrics, p99 (the whole window)", p99, "s"),

@@ -52,3 +52,5 @@ def test_an_exporter_that_never_hears_the_probe_times_nothing(tmp_path: Path) ->
         time.sleep(3)
     assert probe.published >= 5
     assert probe.latencies == [] and probe.failed_reads > 0
+    after = next(row for row in probe.rows("deaf") if "after the first look" in row.figure)
+    assert after.figure.endswith("p99 (of 0)") and not after.met  # nothing timed: no p99 to hold to 1 s
