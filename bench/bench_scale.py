@@ -362,8 +362,7 @@ def run(
             wires.domain,
             *wires.exporter_args,
             f"--ingest.workers={workers}",
-            # The cap is shared out between the workers by hash: headroom, not a limit (a tiny fleet and
-            # its probe robot on four workers overfilled a cap of twice the fleet).
+            # Headroom, not a limit: the probe robot comes on top of the fleet.
             f"--fleet.max-robots={max(DEFAULT_MAX_ROBOTS, 2 * robots)}",
             "--log.level=warning",
             *exporter_options,

@@ -70,8 +70,8 @@ def test_the_status_page_and_the_api_are_timed_while_the_fleet_goes_on_publishin
 
 
 def test_a_tiny_fleet_on_four_workers_is_heard_whole_with_its_probe_robot() -> None:
-    # The robot cap is shared out between the workers by hash: twice the fleet (4) left each worker one
-    # robot, and the fleet's two robots and the probe did not fit.
+    # The exporter's robot cap was twice the fleet, shared out between the workers (one robot each):
+    # the fleet's two robots and the probe did not fit.
     shape = FleetShape(robots=2, components=COMPONENTS)
     rows = {row.figure: row for row in run(shape, workers=4, seconds=SECONDS / 2)}
     label = "2 robots x 20, realistic, zenoh, 4 workers"

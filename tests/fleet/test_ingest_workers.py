@@ -114,6 +114,29 @@ def test_workers_serve_every_dds_robot_once_through_metrics_api_and_check(
         assert exporter.robot("robot99") is None
 
 
+def test_the_robot_cap_holds_for_the_fleet_whichever_worker_its_robots_hash_to(
+    tmp_path: Path, dds_domain: int
+) -> None:
+    config = tmp_path / "overseer.yml"
+    config.write_text("fleet:\n  max_robots: 3\n")
+    crowded = {"robot1", "robot2", "robot3"}
+    assert {Shard().worker_of(robot, 2) for robot in crowded} == {0}  # a share of the cap would keep two
+    with running_exporter(tmp_path, dds_domain, "--ingest.workers=2", f"--config.file={config}") as exporter:
+        with running_simulator(tmp_path, dds_domain, "--robots=3", f"--components={COMPONENTS}"):
+            wait_for(lambda: every_robot_once(exporter, crowded), 30, message="three robots in one worker")
+        # a fourth robot, of the other worker, finds the fleet's cap full
+        assert Shard().worker_of("extra1", 2) == 1
+        extra = ("--robots=1", f"--components={COMPONENTS}", "--namespace-prefix=extra")
+        with running_simulator(tmp_path, dds_domain, *extra):
+            refused = (("reason", "robot_limit"),)
+            wait_for(
+                lambda: exporter.samples()["overseer_statuses_dropped_total"].get(refused),
+                30,
+                message="the fourth robot refused and counted",
+            )
+            assert sorted(robots_served(exporter)) == sorted(crowded)
+
+
 def test_a_killed_worker_is_restarted_and_its_robots_relearned(tmp_path: Path, dds_domain: int) -> None:
     expected = {f"robot{index}" for index in range(1, ROBOTS + 1)}
     with (

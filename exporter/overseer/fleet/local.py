@@ -27,6 +27,7 @@ from overseer.fleet.message_labels import MessageLabels
 from overseer.model import FleetModel, FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import EventSink
 from overseer.model.expiry import start_expiry
+from overseer.model.robot_cap import RobotCap
 from overseer.model.shard import Shard
 from overseer.model.transitions import TransitionDetector
 from overseer.sources import Source, build_sources
@@ -68,14 +69,16 @@ class LocalFleet:
         events: EventSink | None = None,
         start: FleetStart | None = None,
         zenoh_relayed: Connection | None = None,
+        robot_cap: RobotCap | None = None,
     ) -> LocalFleet:
         """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
 
         `events`, when given, receives the model's transitions (level changes as they are applied, and
         what time decides, checked every second); `start` says what it follows before it hears anything;
-        `zenoh_relayed` is an ingest worker's pipe from the exporter's Zenoh relay.
+        `zenoh_relayed` is an ingest worker's pipe from the exporter's Zenoh relay, and `robot_cap` its
+        count of robots against the whole fleet's cap.
         """
-        model = FleetModel(config.fleet)
+        model = FleetModel(config.fleet, robot_cap=robot_cap)
         metrics = config.metrics
         messages = MessageLabels(metrics.message_labels, metrics.message_label_length)
         exposition = FleetExposition(

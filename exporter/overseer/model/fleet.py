@@ -29,6 +29,7 @@ from overseer.model.inventory import (
     listed_state,
     restored_components,
 )
+from overseer.model.robot_cap import RobotCap
 from overseer.model.snapshot import FleetSnapshot
 from overseer.model.state import (
     PERIOD_SAMPLES,
@@ -75,13 +76,16 @@ class FleetModel:
         limits: FleetLimits | None = None,
         clock: Callable[[], float] | None = None,
         wall_clock: Callable[[], float] | None = None,
+        robot_cap: RobotCap | None = None,
     ) -> None:
         """Create an empty fleet bounded by `limits`.
 
         `clock` (default: monotonic) judges ages and `wall_clock` (default: the system's, or `clock` when
-        only that is given, as tests do) dates what is reported.
+        only that is given, as tests do) dates what is reported. `robot_cap` (default: `limits.max_robots`
+        in this model alone) says whether a new robot fits.
         """
         self.limits = limits or FleetLimits()
+        self._robot_cap = RobotCap(self.limits.max_robots) if robot_cap is None else robot_cap
         self._clock = time.monotonic if clock is None else clock
         self._wall_clock = wall_clock or (time.time if clock is None else clock)
         self._lock = threading.Lock()
@@ -136,7 +140,7 @@ class FleetModel:
         with self._lock:
             if robot in self._robots:
                 return True
-            if len(self._robots) >= self.limits.max_robots:
+            if not self._robot_cap.admits(len(self._robots)):
                 self._dropped_statuses["robot_limit"] += 1
                 return False
             self._robots[robot] = RobotState(
@@ -204,7 +208,7 @@ class FleetModel:
         with self._lock:
             state = self._robots.get(robot)
             if state is None:
-                if len(self._robots) >= limits.max_robots:
+                if not self._robot_cap.admits(len(self._robots)):
                     self._message_counts[(transport, "dropped")] += 1
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
                     return Applied(False, None)
@@ -392,6 +396,8 @@ class FleetModel:
                     }
                     if len(kept) < len(state.components):
                         self._robots[name] = _replace_components(state, kept, now)
+            if forgotten:
+                self._robot_cap.holds(len(self._robots))
         return forgotten
 
     def set_inventory(self, inventory: Inventory, owns: Callable[[str], bool] | None = None) -> None:
@@ -417,6 +423,7 @@ class FleetModel:
                     known = RobotState(name, "", None, MappingProxyType({}), now, wall_offset=wall - now)
                 if known.listing != entry:
                     self._robots[name] = listed_state(known, entry, now)
+            self._robot_cap.holds(len(self._robots))  # listed robots are followed whatever the cap
 
     def remember(self, robots: Iterable[RememberedRobot]) -> None:
         """Robots heard before this start: each silent since it was last heard, until it speaks again."""
@@ -426,7 +433,7 @@ class FleetModel:
                 state = self._robots.get(name)
                 if state is not None and state.last_message is not None:
                     continue  # heard already in this run
-                if state is None and len(self._robots) >= self.limits.max_robots:
+                if state is None and not self._robot_cap.admits(len(self._robots)):
                     self._dropped_statuses["robot_limit"] += 1
                     continue
                 last = now - max(0.0, wall - heard_at)
@@ -485,6 +492,7 @@ class FleetModel:
                 return "up"
             del self._robots[name]
             self._forget(name, "retired", wall)
+            self._robot_cap.holds(len(self._robots))
         return "retired"
 
     def _forget(self, name: str, reason: ForgetReason, wall: float) -> None:

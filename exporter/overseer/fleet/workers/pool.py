@@ -82,6 +82,7 @@ class WorkerPool:
         self._events = events
         self._relay = relay
         self._context = multiprocessing.get_context("spawn")
+        self._robot_counts = self._context.Array("q", self.count)  # each worker's robots (fleet.max_robots)
         self._handles: list[_Handle | None] = [None] * self.count
         self._died_at = [0.0] * self.count
         self._restarted_at = [float("-inf")] * self.count
@@ -209,7 +210,16 @@ class WorkerPool:
         relayed, relay_writer = self._context.Pipe(duplex=False) if self._relay else (None, None)
         process = self._context.Process(
             target=run_worker,
-            args=(self.config, index, self.count, child_requests, child_events, self._start(), relayed),
+            args=(
+                self.config,
+                index,
+                self.count,
+                child_requests,
+                child_events,
+                self._start(),
+                relayed,
+                self._robot_counts,
+            ),
             name=f"overseer-ingest-{index}",
             daemon=True,
         )

@@ -13,6 +13,7 @@ import signal
 import threading
 from dataclasses import replace
 from multiprocessing.connection import Connection
+from multiprocessing.sharedctypes import SynchronizedArray
 from typing import Any, NoReturn
 
 from overseer.config import Config
@@ -24,6 +25,7 @@ from overseer.garbage_collection import collect_in_large_batches
 from overseer.heap_trim import limit_heap_arenas, trim_heap_every
 from overseer.log_format import configure_logging
 from overseer.model.events import Event, event_rows
+from overseer.model.robot_cap import SharedRobotCap
 
 log = logging.getLogger(__name__)
 
@@ -32,12 +34,10 @@ FAILED = "failed"
 
 
 def worker_config(config: Config, worker: int, workers: int) -> Config:
-    """The configuration worker `worker` of `workers` runs with: its robots, and its share of the cap."""
-    share = config.fleet.max_robots // workers + (worker < config.fleet.max_robots % workers)
+    """The configuration worker `worker` of `workers` runs with: its robots (the cap is the fleet's)."""
     return replace(
         config,
         shard=config.shard.for_worker(worker, workers),
-        fleet=replace(config.fleet, max_robots=share),
         icinga2=None,  # the exporter pushes for the whole fleet
     )
 
@@ -78,11 +78,13 @@ def run_worker(
     events: Connection,
     start: FleetStart | None = None,
     zenoh_relayed: Connection | None = None,
+    robot_counts: SynchronizedArray[int] | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
     `start` is what it follows before it hears anything (its share of it: the robots it owns);
-    `zenoh_relayed` the pipe its Zenoh robots' samples come down from the exporter's session. Once its
+    `zenoh_relayed` the pipe its Zenoh robots' samples come down from the exporter's session;
+    `robot_counts` every worker's robots, one slot each, against `fleet.max_robots`. Once its
     fleet has stopped, the process ends at once, without the interpreter's shutdown: that shutdown can
     hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
     worker left behind by a dead exporter would hold its robots' readers for good.
@@ -92,7 +94,7 @@ def run_worker(
     trim_heap_every()
     status = 1
     try:
-        status = _serve(config, worker, workers, requests, events, start, zenoh_relayed)
+        status = _serve(config, worker, workers, requests, events, start, zenoh_relayed, robot_counts)
     except BaseException:  # whatever ends it (the exporter gone, a signal): `_exit` would say nothing
         log.exception("ingest worker %d ended", worker)
     finally:
@@ -108,6 +110,7 @@ def _serve(
     events: Connection,
     start: FleetStart | None,
     zenoh_relayed: Connection | None,
+    robot_counts: SynchronizedArray[int] | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
@@ -118,7 +121,8 @@ def _serve(
     config = worker_config(config, worker, workers)
     try:
         sink = _EventSender(events).send if config.events.enabled else None
-        fleet = LocalFleet.build(config, sink, start, zenoh_relayed)
+        cap = None if robot_counts is None else SharedRobotCap(config.fleet.max_robots, robot_counts, worker)
+        fleet = LocalFleet.build(config, sink, start, zenoh_relayed, cap)
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)

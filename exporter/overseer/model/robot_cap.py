@@ -1,0 +1,51 @@
+"""How many robots a fleet model may take: `fleet.max_robots`, in one model or across the ingest workers'.
+
+The workers split a fleet by a hash of the robots' names, which is never exactly even. A share of the cap
+each would refuse robots while the fleet is under it (three robots hashed to one of four workers, with a
+cap of four, left two of them out), so the workers count their robots in shared memory instead, and a
+robot is refused only when the whole fleet holds the cap.
+"""
+
+from __future__ import annotations
+
+from multiprocessing.sharedctypes import SynchronizedArray
+
+
+class RobotCap:
+    """`limit` robots, counted in one fleet model alone."""
+
+    def __init__(self, limit: int) -> None:
+        """Let a model hold up to `limit` robots."""
+        self.limit = limit
+
+    def admits(self, held: int) -> bool:
+        """Whether a model that holds `held` robots may take one more (it takes it at once if so)."""
+        return held < self.limit
+
+    def holds(self, held: int) -> None:
+        """The model now holds `held` robots (after it forgot some, or took listed ones past the cap)."""
+
+
+class SharedRobotCap(RobotCap):
+    """`limit` robots across several processes' models, each counting its own in a slot of `counts`."""
+
+    def __init__(self, limit: int, counts: SynchronizedArray[int], slot: int) -> None:
+        """Count this model's robots in `counts[slot]`, from none (a worker started again relearns them)."""
+        super().__init__(limit)
+        self._counts = counts
+        self._slot = slot
+        counts[slot] = 0
+
+    def admits(self, held: int) -> bool:
+        """Whether the fleet, with this model's `held`, holds under `limit` robots; if so, one more counts."""
+        counts, slot = self._counts, self._slot
+        with counts.get_lock():  # the check and the count together: two workers cannot both take the last
+            every = counts[:]  # the lock is re-entrant
+            if sum(every) - every[slot] + held >= self.limit:
+                return False
+            counts[slot] = held + 1
+            return True
+
+    def holds(self, held: int) -> None:
+        """Count `held` robots for this model."""
+        self._counts[self._slot] = held

@@ -1,0 +1,99 @@
+"""`fleet.max_robots` across several models: the ingest workers count their robots in shared memory.
+
+A worker's share of the cap would refuse robots while the fleet is under it, whenever the hash put more
+than a share's worth in one worker; counted together, the fleet takes exactly the cap, in any split, and
+two processes taking robots at once never take more between them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from multiprocessing.sharedctypes import SynchronizedArray
+from multiprocessing.synchronize import Barrier
+
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.model.robot_cap import SharedRobotCap
+
+CONTEXT = multiprocessing.get_context("spawn")  # as the worker pool starts its workers
+RACED_ROBOTS = 400  # each process tries to take this many
+RACED_CAP = 500  # of their 800
+
+
+class Clock:
+    """A hand-moved clock."""
+
+    def __init__(self) -> None:
+        """Start at a fixed time."""
+        self.now = 1_000.0
+
+    def __call__(self) -> float:
+        """The current time."""
+        return self.now
+
+
+def an_array() -> DiagnosticArray:
+    return DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/a", "ok", "", ()),))
+
+
+def shared_models(cap: int, workers: int, clock: Clock | None = None) -> list[FleetModel]:
+    counts = CONTEXT.Array("q", workers)
+    limits = FleetLimits(max_robots=cap, expire_after=60)
+    return [FleetModel(limits, clock, robot_cap=SharedRobotCap(cap, counts, slot)) for slot in range(workers)]
+
+
+def test_robots_all_in_one_worker_fill_the_whole_cap_and_no_more() -> None:
+    first, second = shared_models(3, 2)
+    for name in ("r1", "r2", "r3"):  # all hashed to one worker: its half of the cap would keep one
+        assert first.apply(name, an_array(), "dds")
+    assert not second.apply("r4", an_array(), "dds")
+    assert not second.register("r5", "dds")
+    assert not first.apply("r6", an_array(), "dds")
+    assert [robot.name for robot in first.snapshot().robots] == ["r1", "r2", "r3"]
+    assert second.snapshot().robots == ()
+    assert second.snapshot().dropped_statuses["robot_limit"] == 2  # r4's one status, and r5
+    assert first.snapshot().dropped_statuses["robot_limit"] == 1
+
+
+def test_a_robot_forgotten_in_one_worker_makes_room_in_another() -> None:
+    clock = Clock()
+    first, second = shared_models(2, 2, clock)
+    first.apply("r1", an_array(), "dds")
+    second.apply("r2", an_array(), "dds")
+    assert not second.apply("r3", an_array(), "dds")
+    clock.now += 61
+    second.apply("r2", an_array(), "dds")  # r2 speaks on; r1 falls silent
+    assert first.expire() == ["r1"]
+    assert second.apply("r3", an_array(), "dds")
+    assert [robot.name for robot in second.snapshot().robots] == ["r2", "r3"]
+
+
+def test_a_worker_started_again_counts_its_robots_from_none() -> None:
+    counts = CONTEXT.Array("q", 2)
+    counts[0], counts[1] = 5, 1  # the dead worker's robots, and another worker's
+    limits = FleetLimits(max_robots=6)
+    restarted = FleetModel(limits, robot_cap=SharedRobotCap(6, counts, 0))
+    for index in range(5):
+        assert restarted.apply(f"r{index}", an_array(), "dds")
+    assert not restarted.apply("r5", an_array(), "dds")
+    assert counts[:] == [5, 1]
+
+
+def take_robots(counts: SynchronizedArray[int], slot: int, start: Barrier) -> None:
+    """In a process of its own: try to take `RACED_ROBOTS` robots, at once with the other process."""
+    model = FleetModel(FleetLimits(max_robots=RACED_CAP), robot_cap=SharedRobotCap(RACED_CAP, counts, slot))
+    start.wait(30)
+    for index in range(RACED_ROBOTS):
+        model.register(f"w{slot}-r{index}", "dds")
+
+
+def test_two_processes_taking_robots_at_once_take_exactly_the_cap() -> None:
+    counts = CONTEXT.Array("q", 2)
+    start = CONTEXT.Barrier(2)  # both models built, then both take robots
+    processes = [CONTEXT.Process(target=take_robots, args=(counts, slot, start)) for slot in range(2)]
+    for process in processes:
+        process.start()
+    for process in processes:
+        process.join(60)
+        assert process.exitcode == 0
+    assert sum(counts[:]) == RACED_CAP  # each model alone would have taken its 400
