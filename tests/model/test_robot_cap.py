@@ -8,7 +8,7 @@ two processes taking robots at once never take more between them.
 from __future__ import annotations
 
 import multiprocessing
-from multiprocessing.sharedctypes import SynchronizedArray
+from collections.abc import MutableSequence
 from multiprocessing.synchronize import Barrier
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
@@ -16,8 +16,8 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.model.robot_cap import SharedRobotCap
 
 CONTEXT = multiprocessing.get_context("spawn")  # as the worker pool starts its workers
-RACED_ROBOTS = 400  # each process tries to take this many
-RACED_CAP = 500  # of their 800
+RACED_ROBOTS = 5_000  # each process tries to take this many
+RACED_CAP = 6_000  # of their 10,000
 
 
 class Clock:
@@ -37,7 +37,7 @@ def an_array() -> DiagnosticArray:
 
 
 def shared_models(cap: int, workers: int, clock: Clock | None = None) -> list[FleetModel]:
-    counts = CONTEXT.Array("q", workers)
+    counts = CONTEXT.RawArray("q", workers)
     limits = FleetLimits(max_robots=cap, expire_after=60)
     return [FleetModel(limits, clock, robot_cap=SharedRobotCap(cap, counts, slot)) for slot in range(workers)]
 
@@ -69,7 +69,7 @@ def test_a_robot_forgotten_in_one_worker_makes_room_in_another() -> None:
 
 
 def test_a_worker_started_again_counts_its_robots_from_none() -> None:
-    counts = CONTEXT.Array("q", 2)
+    counts = CONTEXT.RawArray("q", 2)
     counts[0], counts[1] = 5, 1  # the dead worker's robots, and another worker's
     limits = FleetLimits(max_robots=6)
     restarted = FleetModel(limits, robot_cap=SharedRobotCap(6, counts, 0))
@@ -79,7 +79,7 @@ def test_a_worker_started_again_counts_its_robots_from_none() -> None:
     assert counts[:] == [5, 1]
 
 
-def take_robots(counts: SynchronizedArray[int], slot: int, start: Barrier) -> None:
+def take_robots(counts: MutableSequence[int], slot: int, start: Barrier) -> None:
     """In a process of its own: try to take `RACED_ROBOTS` robots, at once with the other process."""
     model = FleetModel(FleetLimits(max_robots=RACED_CAP), robot_cap=SharedRobotCap(RACED_CAP, counts, slot))
     start.wait(30)
@@ -88,7 +88,7 @@ def take_robots(counts: SynchronizedArray[int], slot: int, start: Barrier) -> No
 
 
 def test_two_processes_taking_robots_at_once_take_exactly_the_cap() -> None:
-    counts = CONTEXT.Array("q", 2)
+    counts = CONTEXT.RawArray("q", 2)
     start = CONTEXT.Barrier(2)  # both models built, then both take robots
     processes = [CONTEXT.Process(target=take_robots, args=(counts, slot, start)) for slot in range(2)]
     for process in processes:
@@ -96,4 +96,4 @@ def test_two_processes_taking_robots_at_once_take_exactly_the_cap() -> None:
     for process in processes:
         process.join(60)
         assert process.exitcode == 0
-    assert sum(counts[:]) == RACED_CAP  # each model alone would have taken its 400
+    assert sum(counts[:]) == RACED_CAP  # each model alone would have taken its 5,000

@@ -1,14 +1,14 @@
 """How many robots a fleet model may take: `fleet.max_robots`, in one model or across the ingest workers'.
 
 The workers split a fleet by a hash of the robots' names, which is never exactly even. A share of the cap
-each would refuse robots while the fleet is under it (three robots hashed to one of four workers, with a
-cap of four, left two of them out), so the workers count their robots in shared memory instead, and a
+each would refuse robots while the fleet is under it (three robots hashed to one of two workers, with a
+cap of three, left one of them out), so the workers count their robots in shared memory instead, and a
 robot is refused only when the whole fleet holds the cap.
 """
 
 from __future__ import annotations
 
-from multiprocessing.sharedctypes import SynchronizedArray
+from collections.abc import MutableSequence
 
 
 class RobotCap:
@@ -27,9 +27,13 @@ class RobotCap:
 
 
 class SharedRobotCap(RobotCap):
-    """`limit` robots across several processes' models, each counting its own in a slot of `counts`."""
+    """`limit` robots across several processes' models, each counting its own in its slot of `counts`.
 
-    def __init__(self, limit: int, counts: SynchronizedArray[int], slot: int) -> None:
+    Each process writes only its own slot, and no lock is shared: a worker killed at any moment (the pool
+    kills one that hangs) cannot leave the others waiting for good.
+    """
+
+    def __init__(self, limit: int, counts: MutableSequence[int], slot: int) -> None:
         """Count this model's robots in `counts[slot]`, from none (a worker started again relearns them)."""
         super().__init__(limit)
         self._counts = counts
@@ -37,14 +41,15 @@ class SharedRobotCap(RobotCap):
         counts[slot] = 0
 
     def admits(self, held: int) -> bool:
-        """Whether the fleet, with this model's `held`, holds under `limit` robots; if so, one more counts."""
+        """Whether the fleet, with this model's `held` and one more, stays within `limit`; counted if so."""
         counts, slot = self._counts, self._slot
-        with counts.get_lock():  # the check and the count together: two workers cannot both take the last
-            every = counts[:]  # the lock is re-entrant
-            if sum(every) - every[slot] + held >= self.limit:
-                return False
-            counts[slot] = held + 1
-            return True
+        # Counted before the fleet is added up: of two workers taking the last robot at once, each sees
+        # the other's, and both refuse rather than both take it (the next message of either asks again).
+        counts[slot] = held + 1
+        if sum(counts) > self.limit:
+            counts[slot] = held
+            return False
+        return True
 
     def holds(self, held: int) -> None:
         """Count `held` robots for this model."""

@@ -82,7 +82,7 @@ class WorkerPool:
         self._events = events
         self._relay = relay
         self._context = multiprocessing.get_context("spawn")
-        self._robot_counts = self._context.Array("q", self.count)  # each worker's robots (fleet.max_robots)
+        self._robot_counts = self._context.RawArray("q", self.count)  # each worker's robots, against the cap
         self._handles: list[_Handle | None] = [None] * self.count
         self._died_at = [0.0] * self.count
         self._restarted_at = [float("-inf")] * self.count

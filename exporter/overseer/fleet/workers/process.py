@@ -11,9 +11,9 @@ import os
 import queue
 import signal
 import threading
+from collections.abc import MutableSequence
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from multiprocessing.sharedctypes import SynchronizedArray
 from typing import Any, NoReturn
 
 from overseer.config import Config
@@ -78,7 +78,7 @@ def run_worker(
     events: Connection,
     start: FleetStart | None = None,
     zenoh_relayed: Connection | None = None,
-    robot_counts: SynchronizedArray[int] | None = None,
+    robot_counts: MutableSequence[int] | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
@@ -110,7 +110,7 @@ def _serve(
     events: Connection,
     start: FleetStart | None,
     zenoh_relayed: Connection | None,
-    robot_counts: SynchronizedArray[int] | None,
+    robot_counts: MutableSequence[int] | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
