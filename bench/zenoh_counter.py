@@ -43,6 +43,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     config.insert_json5("mode", json.dumps("client"))
     config.insert_json5("connect/endpoints", json.dumps([args.endpoint]))
     config.insert_json5("scouting/multicast/enabled", "false")
+    # as the exporter's session (zenoh.shared_memory): every sample crosses the router's link to it whole
+    config.insert_json5("transport/shared_memory/enabled", "false")
     session = zenoh.open(config)
     counted = [0]
     subscriber = session.declare_subscriber(args.key, FifoChannel(1 << 16))  # Zenoh's thread never waits
