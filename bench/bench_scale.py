@@ -81,6 +81,7 @@ class Counts(NamedTuple):
 
     received: float  # messages over the transport
     lost: float  # samples its robots published that it says it never heard (Zenoh's sequence numbers)
+    dropped: float  # samples it heard and dropped: its queue full, or a robot or feed beyond its caps
     events_written: float
     events_dropped: float
     renders_ahead: float  # of the series, shortly before a scrape expected (metrics.render_ahead)
@@ -102,6 +103,7 @@ def counted(url: str, transport: str) -> Counts:
     return Counts(
         messages("received"),
         messages("lost"),
+        messages("dropped"),
         total("overseer_events_written_total"),
         total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
         total(r'overseer_exposition_renders_ahead_total\{result="done"\}'),
@@ -423,6 +425,7 @@ def run(
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
+        Row("scale", f"{label}: of which the exporter heard and dropped", counts.dropped, "messages"),
         Row(
             "scale",
             f"{label}: statuses dropped beyond fleet.max_robots",

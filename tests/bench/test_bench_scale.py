@@ -33,6 +33,7 @@ def test_a_small_fleet_at_two_hertz_is_published_measured_and_labelled_as_asked(
     assert 0.9 * expected <= published.value <= 1.05 * expected, rows.keys()
     assert row("lost updates").value == 0 and row("lost updates").met
     assert row("of which the exporter counted lost").value == 0
+    assert row("of which the exporter heard and dropped").value == 0
     # The subscriber that only counts heard the same fleet through the same router.
     assert row("lost by a subscriber that only counts (same router, same run)").value == 0
     assert row("lost beyond it").value == 0 and row("lost beyond it").met
