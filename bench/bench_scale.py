@@ -58,6 +58,7 @@ from bench.loadgen import add_shape_arguments, check_shape, running_loadgen, sha
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
+from overseer.config.ingest import MAX_INGEST_WORKERS
 from overseer.model.state import FleetLimits
 from testbed.browser import headless_chromium
 from testbed.ports import fresh_domain_id
@@ -81,16 +82,16 @@ class Counts(NamedTuple):
 
     received: float  # messages over the transport
     lost: float  # samples its robots published that it says it never heard (Zenoh's sequence numbers)
-    dropped: float  # samples it heard and dropped: its queue full, or a robot or feed beyond its caps
+    dropped: float  # messages it heard and dropped, or cut: its queue full, a cap, an invalid level
     events_written: float
     events_dropped: float
     renders_ahead: float  # of the series, shortly before a scrape expected (metrics.render_ahead)
     render_ahead_seconds: float  # how long the last took
-    over_cap: float  # statuses dropped because their robot was beyond its worker's share of the robot cap
+    over_cap: float  # statuses dropped because their robot was beyond fleet.max_robots
 
 
 def counted(url: str, transport: str) -> Counts:
-    """Messages received and lost over `transport`, events written and events dropped."""
+    """Messages received, lost and dropped over `transport`, events, renders ahead, robots beyond the cap."""
     with urllib.request.urlopen(url + "/metrics", timeout=300) as response:
         text = response.read().decode()
 
@@ -565,6 +566,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     try:  # before any server starts: a run refused after minutes of setup measures nothing
         sizes = positive_counts("--robots", options.robots)
         worker_counts = positive_counts("--workers", options.workers)
+        if (most := max(worker_counts)) > MAX_INGEST_WORKERS:
+            raise ValueError(f"--workers: each must be at most {MAX_INGEST_WORKERS}, got {most}")
         check_shape(options)
         check_window(options)
     except ValueError as error:

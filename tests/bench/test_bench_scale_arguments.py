@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from bench import bench_scale
 from bench.bench_scale import main
 
 
@@ -14,6 +15,7 @@ from bench.bench_scale import main
         (["--robots=1000,10k"], "--robots: expected comma-separated whole numbers, got '1000,10k'"),
         (["--robots=0"], "--robots: each must be at least 1, got 0"),
         (["--workers=1,0"], "--workers: each must be at least 1, got 0"),
+        (["--workers=65"], "--workers: each must be at most 64, got 65"),
         (["--rate=0"], "--rate: must be positive, got 0.0"),
         (["--trouble-share=1.5"], "--trouble-share: expected a share from 0 to 1, got 1.5"),
         (["--down-seconds=-1"], "--down-seconds: must not be negative, got -1.0"),
@@ -24,8 +26,12 @@ from bench.bench_scale import main
     ],
 )
 def test_a_run_that_cannot_be_measured_is_refused_with_the_flag_named(
-    arguments: list[str], message: str, capsys: pytest.CaptureFixture[str]
+    arguments: list[str], message: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    def run(*_: object, **__: object) -> None:
+        raise AssertionError("a run was started")  # not a minute of servers in the quick tests
+
+    monkeypatch.setattr(bench_scale, "run", run)
     with pytest.raises(SystemExit) as refused:
         main(arguments)
     assert refused.value.code == 2

@@ -1,18 +1,19 @@
 """`fleet.max_robots` across several models: the ingest workers count their robots in shared memory.
 
 A worker's share of the cap would refuse robots while the fleet is under it, whenever the hash put more
-than a share's worth in one worker; counted together, the fleet takes exactly the cap, in any split, and
-two processes taking robots at once never take more between them.
+than a share's worth in one worker; counted together, the fleet takes exactly the cap, in any split,
+gives a robot's place back whichever way it is forgotten, and two workers taking the last place at the
+same moment do not both take it.
 """
 
 from __future__ import annotations
 
 import multiprocessing
-from collections.abc import MutableSequence
+from collections.abc import Callable, MutableSequence
 from multiprocessing.synchronize import Barrier
 
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.model import FleetLimits, FleetModel
+from overseer.model import FleetLimits, FleetModel, Inventory, ListedRobot
 from overseer.model.robot_cap import SharedRobotCap
 
 CONTEXT = multiprocessing.get_context("spawn")  # as the worker pool starts its workers
@@ -33,10 +34,12 @@ class Clock:
 
 
 def an_array() -> DiagnosticArray:
+    """One OK status."""
     return DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/a", "ok", "", ()),))
 
 
 def shared_models(cap: int, workers: int, clock: Clock | None = None) -> list[FleetModel]:
+    """`workers` models counting their robots together against `cap`."""
     counts = CONTEXT.RawArray("q", workers)
     limits = FleetLimits(max_robots=cap, expire_after=60)
     return [FleetModel(limits, clock, robot_cap=SharedRobotCap(cap, counts, slot)) for slot in range(workers)]
@@ -79,6 +82,59 @@ def test_a_worker_started_again_counts_its_robots_from_none() -> None:
     assert counts[:] == [5, 1]
 
 
+def test_a_retired_or_unlisted_robot_gives_its_place_back() -> None:
+    clock = Clock()
+    first, second = shared_models(2, 2, clock)
+    first.set_inventory(Inventory({"listed": ListedRobot((), ())}))  # followed, never heard
+    first.apply("r1", an_array(), "dds")
+    assert not second.apply("r2", an_array(), "dds")
+    first.set_inventory(Inventory({}))  # never heard, so forgotten at once
+    assert second.apply("r2", an_array(), "dds")
+    assert not second.apply("r3", an_array(), "dds")
+    clock.now += 61  # r1 down long since
+    assert first.retire("r1") == "retired"
+    assert second.apply("r3", an_array(), "dds")
+
+
+class Interleaved(list[int]):
+    """Shared counts where another worker does something just before this one's first write."""
+
+    def __init__(self, counts: list[int]) -> None:
+        """Counts as given; `before_write` runs once, at the first write."""
+        super().__init__(counts)
+        self.before_write: Callable[[], object] | None = None
+        self.writes = 0
+
+    def __setitem__(self, index: int, value: int) -> None:  # type: ignore[override]
+        """Let the other worker in first, then write."""
+        self.writes += 1
+        if self.before_write is not None:
+            other, self.before_write = self.before_write, None
+            other()
+        super().__setitem__(index, value)
+
+
+def test_two_workers_taking_the_last_place_at_once_do_not_both_take_it() -> None:
+    counts = Interleaved([0, 0])
+    first, second = (SharedRobotCap(2, counts, slot) for slot in range(2))
+    counts[0] = 1  # the first worker holds a robot: one place left
+    taken_by_second: list[bool] = []
+    counts.before_write = lambda: taken_by_second.append(second.admit(0))
+    # The first sees the place free, and the second takes it before the first counts its robot.
+    assert not first.admit(1)
+    assert taken_by_second == [True]
+    assert list(counts) == [1, 1]
+
+
+def test_a_robot_refused_at_the_cap_writes_nothing() -> None:
+    counts = Interleaved([0, 0])
+    full = SharedRobotCap(2, counts, 0)
+    SharedRobotCap(2, counts, 1).holds(2)
+    counts.writes = 0
+    assert not full.admit(0)
+    assert counts.writes == 0  # every message of a refused robot asks: no write, no cache line bounced
+
+
 def take_robots(counts: MutableSequence[int], slot: int, start: Barrier) -> None:
     """In a process of its own: try to take `RACED_ROBOTS` robots, at once with the other process."""
     model = FleetModel(FleetLimits(max_robots=RACED_CAP), robot_cap=SharedRobotCap(RACED_CAP, counts, slot))
@@ -91,9 +147,14 @@ def test_two_processes_taking_robots_at_once_take_exactly_the_cap() -> None:
     counts = CONTEXT.RawArray("q", 2)
     start = CONTEXT.Barrier(2)  # both models built, then both take robots
     processes = [CONTEXT.Process(target=take_robots, args=(counts, slot, start)) for slot in range(2)]
-    for process in processes:
-        process.start()
-    for process in processes:
-        process.join(60)
-        assert process.exitcode == 0
+    try:
+        for process in processes:
+            process.start()
+        for process in processes:
+            process.join(60)
+            assert process.exitcode == 0
+    finally:
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
     assert sum(counts[:]) == RACED_CAP  # each model alone would have taken its 5,000

@@ -140,7 +140,7 @@ class FleetModel:
         with self._lock:
             if robot in self._robots:
                 return True
-            if not self._robot_cap.admits(len(self._robots)):
+            if not self._robot_cap.admit(len(self._robots)):
                 self._dropped_statuses["robot_limit"] += 1
                 return False
             self._robots[robot] = RobotState(
@@ -208,7 +208,7 @@ class FleetModel:
         with self._lock:
             state = self._robots.get(robot)
             if state is None:
-                if not self._robot_cap.admits(len(self._robots)):
+                if not self._robot_cap.admit(len(self._robots)):
                     self._message_counts[(transport, "dropped")] += 1
                     self._dropped_statuses["robot_limit"] += len(array.statuses)
                     return Applied(False, None)
@@ -396,8 +396,6 @@ class FleetModel:
                     }
                     if len(kept) < len(state.components):
                         self._robots[name] = _replace_components(state, kept, now)
-            if forgotten:
-                self._robot_cap.holds(len(self._robots))
         return forgotten
 
     def set_inventory(self, inventory: Inventory, owns: Callable[[str], bool] | None = None) -> None:
@@ -423,7 +421,7 @@ class FleetModel:
                     known = RobotState(name, "", None, MappingProxyType({}), now, wall_offset=wall - now)
                 if known.listing != entry:
                     self._robots[name] = listed_state(known, entry, now)
-            self._robot_cap.holds(len(self._robots))  # listed robots are followed whatever the cap
+            self._robot_cap.holds(len(self._robots))  # listed robots are followed past the cap
 
     def remember(self, robots: Iterable[RememberedRobot]) -> None:
         """Robots heard before this start: each silent since it was last heard, until it speaks again."""
@@ -433,7 +431,7 @@ class FleetModel:
                 state = self._robots.get(name)
                 if state is not None and state.last_message is not None:
                     continue  # heard already in this run
-                if state is None and not self._robot_cap.admits(len(self._robots)):
+                if state is None and not self._robot_cap.admit(len(self._robots)):
                     self._dropped_statuses["robot_limit"] += 1
                     continue
                 last = now - max(0.0, wall - heard_at)
@@ -492,11 +490,11 @@ class FleetModel:
                 return "up"
             del self._robots[name]
             self._forget(name, "retired", wall)
-            self._robot_cap.holds(len(self._robots))
         return "retired"
 
     def _forget(self, name: str, reason: ForgetReason, wall: float) -> None:
         """Count and note a robot just dropped from `_robots` (under the lock), for the event detector."""
+        self._robot_cap.holds(len(self._robots))
         self._clashed.pop(name, None)
         self._forgotten_counts[reason] += 1
         forgotten = self._forgotten

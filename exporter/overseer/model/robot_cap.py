@@ -3,12 +3,14 @@
 The workers split a fleet by a hash of the robots' names, which is never exactly even. A share of the cap
 each would refuse robots while the fleet is under it (three robots hashed to one of two workers, with a
 cap of three, left one of them out), so the workers count their robots in shared memory instead, and a
-robot is refused only when the whole fleet holds the cap.
+robot is refused once the whole fleet holds the cap.
 """
 
 from __future__ import annotations
 
 from collections.abc import MutableSequence
+
+ATTEMPTS = 3  # a worker that met another taking the last places at the same moment looks again
 
 
 class RobotCap:
@@ -18,8 +20,8 @@ class RobotCap:
         """Let a model hold up to `limit` robots."""
         self.limit = limit
 
-    def admits(self, held: int) -> bool:
-        """Whether a model that holds `held` robots may take one more (it takes it at once if so)."""
+    def admit(self, held: int) -> bool:
+        """Whether a model that holds `held` robots may take one more; counted at once if so."""
         return held < self.limit
 
     def holds(self, held: int) -> None:
@@ -30,7 +32,11 @@ class SharedRobotCap(RobotCap):
     """`limit` robots across several processes' models, each counting its own in its slot of `counts`.
 
     Each process writes only its own slot, and no lock is shared: a worker killed at any moment (the pool
-    kills one that hangs) cannot leave the others waiting for good.
+    kills one that hangs) cannot leave the others waiting for good. A robot is counted before the fleet is
+    added up again, so two workers taking the last place at the same moment see each other and do not
+    both take it. Without a memory barrier between the write and the reads that holds in practice (the
+    interpreter runs a great many instructions between them), not by proof: at worst the fleet goes past
+    the cap by a robot a worker.
     """
 
     def __init__(self, limit: int, counts: MutableSequence[int], slot: int) -> None:
@@ -40,16 +46,17 @@ class SharedRobotCap(RobotCap):
         self._slot = slot
         counts[slot] = 0
 
-    def admits(self, held: int) -> bool:
+    def admit(self, held: int) -> bool:
         """Whether the fleet, with this model's `held` and one more, stays within `limit`; counted if so."""
         counts, slot = self._counts, self._slot
-        # Counted before the fleet is added up: of two workers taking the last robot at once, each sees
-        # the other's, and both refuse rather than both take it (the next message of either asks again).
-        counts[slot] = held + 1
-        if sum(counts) > self.limit:
-            counts[slot] = held
-            return False
-        return True
+        for _ in range(ATTEMPTS):
+            if sum(counts) - counts[slot] + held >= self.limit:
+                return False  # full: nothing written, so a refused robot's every message costs no write
+            counts[slot] = held + 1
+            if sum(counts) <= self.limit:
+                return True
+            counts[slot] = held  # another worker took the place meanwhile
+        return False
 
     def holds(self, held: int) -> None:
         """Count `held` robots for this model."""

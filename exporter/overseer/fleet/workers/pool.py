@@ -274,6 +274,7 @@ class WorkerPool:
                 now = time.monotonic()
                 if not self._died_at[index]:
                     self._died_at[index] = now
+                    self._robot_counts[index] = 0  # its robots are no one's until it relearns them
                     log.error(
                         "ingest worker %d (pid %s) exited with code %s; restarting it",
                         index,

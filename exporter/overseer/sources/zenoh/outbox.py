@@ -31,7 +31,7 @@ MAX_BATCH = 2_000  # items a batch: a receiver far behind gets its backlog in pi
 # What an item may wait for its batch. Each batch wakes this thread and the worker's reader, and each
 # waits for its process's interpreter lock: with four workers at 3,000 robots, batches every 10 ms cost
 # 77-83 µs of CPU a message in all, every 50 ms 58-61 µs (runs alternating), for 20-40 ms more latency.
-PAUSE_SECONDS = 0.05
+BATCH_PAUSE_SECONDS = 0.05
 
 Deliver = Callable[[list[Item]], bool]  # hands one batch on; False once its receiver is gone
 
@@ -113,4 +113,4 @@ class Outbox:
             if drained:
                 trim_heap()
             if not more:
-                time.sleep(PAUSE_SECONDS)  # let the next batch gather rather than hand each sample alone
+                time.sleep(BATCH_PAUSE_SECONDS)  # let the next batch gather rather than hand each alone
