@@ -503,8 +503,8 @@ def run(
     ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
 
 
-def positive_counts(flag: str, text: str) -> list[int]:
-    """`text`'s comma-separated whole numbers, each at least 1; ValueError naming `flag` otherwise."""
+def positive_counts(flag: str, text: str, most: int | None = None) -> list[int]:
+    """`text`'s comma-separated whole numbers, each from 1 to `most`; ValueError naming `flag` otherwise."""
     counts = []
     for part in text.split(","):
         try:
@@ -513,6 +513,8 @@ def positive_counts(flag: str, text: str) -> list[int]:
             raise ValueError(f"{flag}: expected comma-separated whole numbers, got {text!r}") from None
         if count < 1:
             raise ValueError(f"{flag}: each must be at least 1, got {count}")
+        if most is not None and count > most:
+            raise ValueError(f"{flag}: each must be at most {most}, got {count}")
         counts.append(count)
     return counts
 
@@ -565,9 +567,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     options = parser.parse_args(argv)
     try:  # before any server starts: a run refused after minutes of setup measures nothing
         sizes = positive_counts("--robots", options.robots)
-        worker_counts = positive_counts("--workers", options.workers)
-        if (most := max(worker_counts)) > MAX_INGEST_WORKERS:
-            raise ValueError(f"--workers: each must be at most {MAX_INGEST_WORKERS}, got {most}")
+        worker_counts = positive_counts("--workers", options.workers, MAX_INGEST_WORKERS)
         check_shape(options)
         check_window(options)
     except ValueError as error:
