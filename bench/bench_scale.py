@@ -7,7 +7,10 @@ with the realistic profile (1 % of statuses changing a second, 2 % of robots in 
 `--profile live`; `--components`, `--rate`, `--change-share`, `--trouble-share`, `--down-share`,
 `--down-seconds` and `--seed` shape the fleet as they do `bench.loadgen`'s. The generator waits until
 the exporter's subscriptions match every robot, so the ramp-up (every robot's first array) is inside
-the window. Beside the fleet, one more robot
+the window. With `--head-start S` the robots are declared S seconds before they first publish; by
+default they publish as soon as they are declared, as a fleet that starts all at once or comes back to
+a restarted router, and a router passing 10,000 robots' 20,000 tokens on drops samples while it does.
+Beside the fleet, one more robot
 (`bench.change_probe`) changes a value every second: the time each change takes to reach the exporter's
 model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
 the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
@@ -15,7 +18,7 @@ The first look (every robot's first array read whole, with one event a component
 meanwhile: how long it took is printed, and the p99 is given over the whole window and after it (the
 target's). With `--floor` a subscriber that only counts (`bench.zenoh_counter`, subscribed to the
 tokens as the exporter is) hears the same fleet through the same router: what it missed, the router
-never delivered to anyone.
+never delivered to anyone (a second subscriber of the tokens adds to the router's work as a fleet starts).
 Lost updates = messages the generator published minus messages the exporter counted as received (the
 probe's taken out); CPU is the exporter's processes' (main and workers) over the window; the
 generator's own CPU per 1,000 robots is printed beside every figure. `--transport dds` publishes raw
@@ -340,17 +343,20 @@ def run(
     rate: float = 1.0,
     floor: bool = False,
     page: bool = False,
+    head_start: float = 0.0,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
     `floor`: a subscriber that only counts (`bench.zenoh_counter`, the exporter's token subscription
     too) hears the same fleet through the same router in the same run: the samples the router itself
     does not deliver. `page`: after the window, while the fleet goes on publishing, Chromium loads the
-    status page and the JSON API and event history are read.
+    status page and the JSON API and event history are read. `head_start`: the robots are declared that
+    many seconds before they publish (a router takes seconds to pass a large fleet's tokens on).
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
     label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}"
+    label += f", declared {head_start:g} s before publishing" if head_start else ""
     label += "".join(f", {option}" for option in exporter_options)
     phases = 1 + rules  # the floor's, then the rules'
     publishing = seconds + (
@@ -381,10 +387,12 @@ def run(
                 *wires.loadgen_args,
                 f"--wait-for-subscribers={max(60, robots / 50)}",
                 f"--duration={publishing}",
+                f"--head-start={head_start}",
             ],
             Path(tmp),
         ) as loadgen:
             loadgen.wait_ready(max(60, robots / 50))
+            time.sleep(head_start)  # the window starts with the first publications
             started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
             prometheus_rows: list[Row] = []
             with wires.probe(exporter.url, shape.components) as probe:
@@ -529,6 +537,8 @@ def check_window(options: argparse.Namespace) -> None:
         raise ValueError(f"--scrape-interval: must be at least 1 s, got {options.scrape_interval}")
     if options.rules and not options.prometheus_seconds:
         raise ValueError("--rules: needs --prometheus-seconds (the rules run in that Prometheus)")
+    if not options.head_start >= 0:
+        raise ValueError(f"--head-start: must not be negative, got {options.head_start}")
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
 
@@ -563,6 +573,13 @@ def main(argv: Sequence[str] | None = None) -> None:
         action="store_true",
         help="then Chromium loads the status page, the JSON API and event history are read, under traffic",
     )
+    parser.add_argument(
+        "--head-start",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="the robots are declared SECONDS before they publish (default 0: the fleet starts all at once)",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args(argv)
     try:  # before any server starts: a run refused after minutes of setup measures nothing
@@ -587,6 +604,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.rate,
                 options.floor,
                 options.page,
+                options.head_start,
             )
     emit(rows)
 

@@ -58,6 +58,7 @@ class LoadSettings:
     namespace_prefix: str = "robot"  # robots are PREFIX1 ... PREFIXN
     duration: float | None = None  # seconds of publishing; None: until stopped
     wait_for_subscribers: float = 0.0  # seconds to wait, before publishing, for every robot to be matched
+    head_start: float = 0.0  # seconds the robots are declared (their subscribers found) before they publish
     ready_file: str | None = None
 
     def robot_names(self) -> list[str]:
@@ -161,6 +162,9 @@ class LoadGenerator:
         if settings.ready_file:
             Path(settings.ready_file).write_text("ready\n")
         subscribed_after = self._wait_for_subscribers() if settings.wait_for_subscribers else None
+        if settings.head_start:
+            print(f"publishing in {settings.head_start:g} s", flush=True)
+            self._stop.wait(settings.head_start)
         pacing = Pacing(robots, settings.rate)
         slice_seconds = min(SLICE_SECONDS[1], max(SLICE_SECONDS[0], SLICE_MESSAGES / pacing.per_second))
         live = settings.shape.profile == LIVE
@@ -299,6 +303,14 @@ def add_wire_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="before publishing, wait up to SECONDS until every robot has a subscriber",
     )
+    parser.add_argument(
+        "--head-start",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="seconds between declaring the robots (and finding their subscribers) and publishing: a fleet "
+        "that came up before (default 0: a fleet that starts all at once)",
+    )
     parser.add_argument("--ready-file", help="written once every robot's publisher is declared")
 
 
@@ -309,6 +321,8 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
     check_shape(args)
     if args.robots_per_session < 1:
         raise ValueError(f"--robots-per-session: must be at least 1, got {args.robots_per_session}")
+    if not args.head_start >= 0:
+        raise ValueError(f"--head-start: must not be negative, got {args.head_start}")
     if not _ROS_NAMESPACE.fullmatch(args.namespace_prefix):
         raise ValueError(f"--namespace-prefix: expected ROS name tokens, got {args.namespace_prefix!r}")
     return LoadSettings(
@@ -325,6 +339,7 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
         namespace_prefix=args.namespace_prefix,
         duration=args.duration,
         wait_for_subscribers=args.wait_for_subscribers,
+        head_start=args.head_start,
         ready_file=args.ready_file,
     )
 

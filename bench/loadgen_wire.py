@@ -44,6 +44,7 @@ from overseer.sources.zenoh.keys import (
 ZENOH = "zenoh"
 DDS = "dds"
 TRANSPORTS = (ZENOH, DDS)
+SESSION_TX_BATCHES = 16  # batches waiting on a session's link, as on the shipped router's (deploy/zenoh)
 # Writes a sample's sequence number and source timestamp into an attachment: (buffer, 0, sequence, ns).
 patch_attachment = struct.Struct("<qq").pack_into
 
@@ -79,6 +80,19 @@ class ZenohEndpoints:
     robots_per_session: int = 1000
 
 
+def session_config(endpoints: ZenohEndpoints) -> zenoh.Config:
+    """The configuration of each of the generator's Zenoh sessions."""
+    native = zenoh.Config()
+    native.insert_json5("mode", json.dumps(endpoints.mode))
+    native.insert_json5("connect/endpoints", json.dumps(list(endpoints.connect)))
+    native.insert_json5("listen/endpoints", json.dumps(list(endpoints.listen)))
+    native.insert_json5("scouting/multicast/enabled", "false")
+    # A session carries the traffic of a thousand robots' sessions: with Zenoh's 2 batches waiting, some of a
+    # fleet's first publications, sent together at its start, were dropped there.
+    native.insert_json5("transport/link/tx/queue/size/data", str(SESSION_TX_BATCHES))
+    return native
+
+
 class ZenohWire:
     """The fleet as rmw_zenoh publishes it, a session for every `robots_per_session` robots.
 
@@ -89,11 +103,7 @@ class ZenohWire:
 
     def __init__(self, names: Sequence[str], domain: int, endpoints: ZenohEndpoints) -> None:
         """Open the sessions (in peer mode they need not reach anyone yet); no robot is declared."""
-        native = zenoh.Config()
-        native.insert_json5("mode", json.dumps(endpoints.mode))
-        native.insert_json5("connect/endpoints", json.dumps(list(endpoints.connect)))
-        native.insert_json5("listen/endpoints", json.dumps(list(endpoints.listen)))
-        native.insert_json5("scouting/multicast/enabled", "false")
+        native = session_config(endpoints)
         count = -(-len(names) // endpoints.robots_per_session)
         self.sessions = [zenoh.open(native) for _ in range(count)]  # robot i on session i // per session
         self._per_session = endpoints.robots_per_session

@@ -22,6 +22,7 @@ from bench.bench_scale import main
         (["--seconds=0"], "--seconds: must be positive, got 0.0"),
         (["--scrape-interval=0"], "--scrape-interval: must be at least 1 s, got 0"),
         (["--rules"], "--rules: needs --prometheus-seconds"),
+        (["--head-start=-0.5"], "--head-start: must not be negative, got -0.5"),
         (["--floor", "--transport=dds"], "--floor: its counting subscriber hears the fleet through"),
     ],
 )

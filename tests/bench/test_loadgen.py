@@ -7,6 +7,7 @@ an exporter would read.
 from __future__ import annotations
 
 import argparse
+import json
 import threading
 import time
 from collections.abc import Sequence
@@ -32,7 +33,7 @@ from bench.loadgen_payloads import (
     leaf_count,
     value_variants,
 )
-from bench.loadgen_wire import ZenohEndpoints, ZenohWire, patch_attachment
+from bench.loadgen_wire import SESSION_TX_BATCHES, ZenohEndpoints, ZenohWire, patch_attachment, session_config
 from overseer.codec.cdr import decode_diagnostic_array
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray
@@ -248,6 +249,33 @@ def test_the_generator_publishes_every_robot_at_its_rate_with_the_time_as_stamp(
     assert figures.cpu_percent_per_1000_robots == pytest.approx(figures.cpu_percent * 50, rel=0.01)
 
 
+class TimingWire(RecordingWire):
+    """A recording wire that also notes when robots were declared and when it first published."""
+
+    def __init__(self) -> None:
+        """Nothing declared or sent yet."""
+        super().__init__()
+        self.last_opened = self.first_published = 0.0
+
+    def open(self, robot: int) -> None:
+        """The robot is up, now."""
+        super().open(robot)
+        self.last_opened = time.monotonic()
+
+    def publish(self, first: int, stop: int, payloads: Sequence[bytearray], stamp: bytes) -> int:
+        """Keep the payloads; the moment of the first publication."""
+        self.first_published = self.first_published or time.monotonic()
+        return super().publish(first, stop, payloads, stamp)
+
+
+def test_a_head_start_holds_the_first_publication_back_and_is_not_counted_as_publishing() -> None:
+    wire = TimingWire()
+    settings = LoadSettings(FleetShape(robots=20, components=10), rate=10.0, duration=0.3, head_start=0.5)
+    figures = LoadGenerator(settings, wire).run()
+    assert wire.first_published - wire.last_opened >= 0.5
+    assert figures.seconds < 0.5 and figures.published >= 20
+
+
 def test_the_generator_stops_when_asked() -> None:
     generator = LoadGenerator(LoadSettings(FleetShape(robots=5, components=10)), RecordingWire())
     threading.Timer(0.2, generator.stop).start()
@@ -261,6 +289,7 @@ def test_the_generator_stops_when_asked() -> None:
         (["--change-share=2"], "--change-share: expected a share from 0 to 1, got 2.0"),
         (["--robots=0"], "--robots: must be at least 1, got 0"),
         (["--namespace-prefix=9x"], "--namespace-prefix: expected ROS name tokens, got '9x'"),
+        (["--head-start=-1"], "--head-start: must not be negative, got -1.0"),
     ],
 )
 def test_bad_arguments_are_refused_with_the_flag_named(
@@ -330,3 +359,10 @@ def test_the_zenoh_wire_puts_rmw_zenoh_keys_attachments_and_stamped_payloads() -
     assert decoded(first.payload.to_bytes()).statuses == fleet.templates[0].statuses
     sequence = [int.from_bytes(s.attachment.to_bytes()[:8], "little") for s in (first, again) if s.attachment]
     assert sequence == [1, 2]
+
+
+def test_a_generator_session_holds_more_than_zenohs_two_batches_for_a_thousand_robots_data() -> None:
+    config = session_config(ZenohEndpoints(("tcp/127.0.0.1:7447",), (), "client", 1000))
+    assert json.loads(config.get_json("transport/link/tx/queue/size/data")) == SESSION_TX_BATCHES >= 16
+    assert json.loads(zenoh.Config().get_json("transport/link/tx/queue/size/data")) == 2
+    assert json.loads(config.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7447"]
