@@ -10,15 +10,16 @@ the exporter's subscriptions match every robot, so the ramp-up (every robot's fi
 the window. With `--head-start S` the robots are declared S seconds before they first publish; by
 default they publish as soon as they are declared, as a fleet that starts all at once or comes back to
 a restarted router, and a router passing 10,000 robots' 20,000 tokens on drops samples while it does.
-Beside the fleet, one more robot
-(`bench.change_probe`) changes a value every second: the time each change takes to reach the exporter's
-model, which every scrape renders, gives the p99 of a change's time to `/metrics` (target <= 1 s). In
-the window's last seconds, check_ros_diagnostics of one robot is timed against `python -c pass`.
+Beside the fleet, one more robot (`bench.change_probe`) changes a value every second: the time each
+change takes to reach the exporter's model, which every scrape renders, gives the p99 of a change's time
+to `/metrics` (target <= 1 s). In the window's last seconds, check_ros_diagnostics of one robot is timed
+against `python -c pass`.
 The first look (every robot's first array read whole, with one event a component) holds up what arrives
 meanwhile: how long it took is printed, and the p99 is given over the whole window and after it (the
 target's). With `--floor` a subscriber that only counts (`bench.zenoh_counter`, subscribed to the
 tokens as the exporter is) hears the same fleet through the same router: what it missed, the router
-never delivered to anyone (a second subscriber of the tokens adds to the router's work as a fleet starts).
+never delivered to anyone (a second subscriber of the tokens adds to the router's work as a fleet
+starts).
 Lost updates = messages the generator published minus messages the exporter counted as received (the
 probe's taken out); CPU is the exporter's processes' (main and workers) over the window; the
 generator's own CPU per 1,000 robots is printed beside every figure. `--transport dds` publishes raw
@@ -57,7 +58,14 @@ from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, stati
 from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
-from bench.loadgen import add_shape_arguments, check_shape, running_loadgen, shape_arguments, shape_of
+from bench.loadgen import (
+    add_shape_arguments,
+    check_head_start,
+    check_shape,
+    running_loadgen,
+    shape_arguments,
+    shape_of,
+)
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
@@ -392,7 +400,7 @@ def run(
             Path(tmp),
         ) as loadgen:
             loadgen.wait_ready(max(60, robots / 50))
-            time.sleep(head_start)  # the window starts with the first publications
+            time.sleep(head_start)  # the window opens as the robots start publishing, as without a head start
             started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
             prometheus_rows: list[Row] = []
             with wires.probe(exporter.url, shape.components) as probe:
@@ -537,8 +545,7 @@ def check_window(options: argparse.Namespace) -> None:
         raise ValueError(f"--scrape-interval: must be at least 1 s, got {options.scrape_interval}")
     if options.rules and not options.prometheus_seconds:
         raise ValueError("--rules: needs --prometheus-seconds (the rules run in that Prometheus)")
-    if not options.head_start >= 0:
-        raise ValueError(f"--head-start: must not be negative, got {options.head_start}")
+    check_head_start(options.head_start)
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
 
@@ -578,7 +585,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         type=float,
         default=0.0,
         metavar="SECONDS",
-        help="the robots are declared SECONDS before they publish (default 0: the fleet starts all at once)",
+        help="the robots are declared SECONDS before they first publish (default 0: all start at once)",
     )
     add_shape_arguments(parser)
     options = parser.parse_args(argv)

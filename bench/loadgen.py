@@ -308,8 +308,8 @@ def add_wire_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=0.0,
         metavar="SECONDS",
-        help="seconds between declaring the robots (and finding their subscribers) and publishing: a fleet "
-        "that came up before (default 0: a fleet that starts all at once)",
+        help="the robots are declared SECONDS before they first publish (default 0: the fleet starts all at "
+        "once)",
     )
     parser.add_argument("--ready-file", help="written once every robot's publisher is declared")
 
@@ -321,8 +321,7 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
     check_shape(args)
     if args.robots_per_session < 1:
         raise ValueError(f"--robots-per-session: must be at least 1, got {args.robots_per_session}")
-    if not args.head_start >= 0:
-        raise ValueError(f"--head-start: must not be negative, got {args.head_start}")
+    check_head_start(args.head_start)
     if not _ROS_NAMESPACE.fullmatch(args.namespace_prefix):
         raise ValueError(f"--namespace-prefix: expected ROS name tokens, got {args.namespace_prefix!r}")
     return LoadSettings(
@@ -342,6 +341,12 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
         head_start=args.head_start,
         ready_file=args.ready_file,
     )
+
+
+def check_head_start(seconds: float) -> None:
+    """ValueError unless `seconds` is a head start the generator can wait: finite and not negative."""
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise ValueError(f"--head-start: must be a finite number of seconds, not negative, got {seconds}")
 
 
 def check_shape(args: argparse.Namespace) -> None:
