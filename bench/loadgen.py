@@ -10,8 +10,9 @@ It measures itself: the CPU it used while publishing (every thread of the proces
 included), as a share of one core and per 1,000 robots, the messages it published, those it sent late
 (more than a tenth of a period after they were due) or skipped (a whole period behind), and the
 statuses it changed. It prints a line `ready` (and writes `--ready-file`) once every robot is declared,
-waits with `--wait-for-subscribers` until every robot has a subscriber, and ends with human lines and
-one JSON line of `LoadFigures`. Benchmarks start it with `start_loadgen` and read those figures.
+waits with `--wait-for-subscribers` until every robot has a subscriber (and `--head-start` seconds more,
+for a fleet declared before it publishes), and ends with human lines and one JSON line of `LoadFigures`.
+Benchmarks start it with `start_loadgen` and read those figures.
 """
 
 from __future__ import annotations
