@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model.component_keys import ComponentKeys
 from overseer.model.inventory import (
     EXPECTED_FEED,
     Inventory,
@@ -99,6 +100,7 @@ class FleetModel:
         # whoever saw the apply's result in a snapshot can wait for its events to be sent first.
         self._telling = threading.Lock()
         self._clashed: dict[str, set[str]] = {}  # robot → names it reports kept apart by hardware_id
+        self._keys = ComponentKeys()
         self._forgotten: dict[str, Forgetting] = {}  # the robots forgotten last, oldest first, and why
         self._forgotten_counts: Counter[str] = Counter()
 
@@ -221,7 +223,8 @@ class FleetModel:
                 self._message_counts[(transport, "dropped")] += 1
                 self._dropped_statuses["feed_limit"] += len(array.statuses)
                 return Applied(False, None)
-            merge = _Merge(state, feed_name, now, limits, changes, self._clashed.setdefault(robot, set()))
+            clashed = self._clashed.setdefault(robot, set())
+            merge = _Merge(state, feed_name, now, limits, changes, clashed, self._keys)
             latest = merge.statuses(prepared, dropped)
             if position is None:
                 new_feed = Feed(feed_name, topic, now, latest, lossless=None not in latest)
@@ -548,6 +551,7 @@ class _Merge:
         limits: FleetLimits,
         changes: list[LevelChange] | None,
         clashed: set[str],
+        keys: ComponentKeys,
     ) -> None:
         self.components = state.components.copy()
         self._feed = feed
@@ -555,6 +559,7 @@ class _Merge:
         self._limits = limits
         self._changes = changes
         self._clashed = clashed  # the robot's names kept apart by hardware_id (the model's own set)
+        self._keys = keys
         self._missing = set(state.missing)
         self._in_message: set[ComponentKey] = set()
         self.added = False  # a component the robot had not reported: its expectations are judged again
@@ -566,6 +571,7 @@ class _Merge:
     ) -> tuple[ComponentKey | None, ...]:
         """Merge every status of the array; the components they went to, in order (the feed's latest)."""
         components, limits, in_message = self.components, self._limits, self._in_message
+        shared_key = self._keys.of
         first_ids = _clashes(prepared)
         for name in first_ids:
             if name not in self._clashed:  # kept apart from now on: the component under the name alone goes
@@ -579,7 +585,10 @@ class _Merge:
                 latest.append(None)
                 continue
             (name, hardware_id), level, message, values, intact = entry
-            key = (name, "") if name not in self._clashed else self._kept_apart(name, hardware_id, first_ids)
+            if name in self._clashed:
+                key = self._kept_apart(name, hardware_id, first_ids)
+            else:
+                key = shared_key(name)
             previous = components.get(key)
             if previous is not None and previous.feed == EXPECTED_FEED:
                 previous = None  # reported at last: a new component, in the stand-in's place
