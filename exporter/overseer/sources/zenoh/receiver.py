@@ -7,6 +7,11 @@ with wildcards, so robots that start later, or were built against another revisi
 attachment and payload; a token as its key and whether it came or went. Routers that are not up yet are
 retried until they are.
 
+The bridge's tokens are subscribed to once a sample in the bridge's key format is heard, with the
+tokens' history, so none is missed: a router serves every subscription of tokens as it serves another
+subscriber, and a fleet of 10,000 rmw_zenoh robots starting at once lost 2.5-4 times more updates at
+the router while the exporter held two (bench/README.md, 2026-11-29).
+
 The samples and the tokens queue in channels that Zenoh fills without Python's interpreter lock, and a
 thread of ours drains each: a Python callback would hold Zenoh's receiving thread on the lock for every
 sample or token, so a busy moment in Python would stall the link and the router would drop samples.
@@ -78,6 +83,8 @@ class ZenohReceiver:
         self._lock = threading.Lock()
         self._session: zenoh.Session | None = None
         self._declared: list[zenoh.Subscriber[Any]] = []
+        self.token_subscriptions: list[str] = []  # the key expressions of the tokens subscribed to
+        self._bridge_heard = False  # a sample in the bridge's key format came: its tokens are wanted
         self.samples_heard = 0  # samples this session received
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -107,23 +114,19 @@ class ZenohReceiver:
         domain, formats = self._config.domain, self._config.key_formats
         # Declared without the lock held: `stop` may wait for it meanwhile.
         declared: list[zenoh.Subscriber[Any]] = []
-        for key in data_subscriptions(domain, formats):
-            subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
-            declared.append(subscriber)
-            if self._on_dropped is None:
-                self._start_drain(subscriber.handler, self._sample, "zenoh-data")
-            else:
-                self._start_buffered_drain(subscriber.handler)
-        liveliness = session.liveliness()
-        tokens = [liveliness_subscription(domain)] if RMW_ZENOH in formats else []
-        tokens += [bridge_liveliness_subscription()] if BRIDGE in formats else []
-        # Tokens wait in a channel too: a callback would hold the link's receiving thread on the
-        # interpreter lock for each of them (a fleet's 20,000 at once), and the router would drop the
-        # samples that came meanwhile.
-        for key in tokens:
-            subscriber = liveliness.declare_subscriber(key, FifoChannel(MAX_WAITING_TOKENS), history=True)
-            declared.append(subscriber)
-            self._start_drain(subscriber.handler, self._token, "zenoh-tokens")
+        for key_format in formats:
+            bridged = key_format == BRIDGE
+            for key in data_subscriptions(domain, (key_format,)):
+                subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
+                declared.append(subscriber)
+                if self._on_dropped is None:
+                    handle = self._bridged_sample if bridged else self._sample
+                    self._start_drain(subscriber.handler, handle, "zenoh-data")
+                else:
+                    copy = self._bridged_copy if bridged else self._copy
+                    self._start_buffered_drain(subscriber.handler, copy)
+        if RMW_ZENOH in formats:
+            declared.append(self._subscribe_tokens(session, liveliness_subscription(domain)))
         with self._lock:
             stopped = self._stop.is_set()
             if not stopped:
@@ -131,9 +134,45 @@ class ZenohReceiver:
         if stopped:
             session.close()  # type: ignore[no-untyped-call]
             return
+        if self._bridge_heard:  # before the session was kept: its tokens could not be subscribed to then
+            self._subscribe_bridge_tokens()
         log.info("Zenoh session %s open (%s)", session.zid(), self._native.get_json("mode"))
         while not self._stop.wait(TICK_SECONDS):
             self._tick()
+
+    def _subscribe_tokens(self, session: zenoh.Session, key: str) -> zenoh.Subscriber[Any]:
+        """Subscribe to the tokens matching `key`, those declared before included, drained by a thread."""
+        # Tokens wait in a channel too: a callback would hold the link's receiving thread on the
+        # interpreter lock for each of them (a fleet's 20,000 at once), and the router would drop the
+        # samples that came meanwhile.
+        liveliness = session.liveliness()
+        subscriber = liveliness.declare_subscriber(key, FifoChannel(MAX_WAITING_TOKENS), history=True)
+        self.token_subscriptions.append(key)
+        self._start_drain(subscriber.handler, self._token, "zenoh-tokens")
+        return subscriber
+
+    def _subscribe_bridge_tokens(self) -> None:
+        """Subscribe to zenoh-bridge-ros2dds's tokens, once, if the session is open and not stopping."""
+        with self._lock:
+            session = self._session
+            key = bridge_liveliness_subscription()
+            if session is None or key in self.token_subscriptions:
+                return
+            # Under the lock: `stop` undeclares what is declared, and takes the lock to do so.
+            self._declared.append(self._subscribe_tokens(session, key))
+
+    def _bridged_copy(self, sample: zenoh.Sample) -> _Copied | None:
+        """`_copy` for a sample in the bridge's key format: the first one subscribes to its tokens."""
+        if not self._bridge_heard:
+            self._bridge_heard = True
+            self._subscribe_bridge_tokens()
+        return self._copy(sample)
+
+    def _bridged_sample(self, sample: zenoh.Sample) -> None:
+        """`_sample` for a sample in the bridge's key format: the first one subscribes to its tokens."""
+        copied = self._bridged_copy(sample)
+        if copied is not None:
+            self._hand_on(copied)
 
     def _open(self) -> zenoh.Session | None:
         delay = RETRY_MIN_SECONDS
@@ -155,10 +194,10 @@ class ZenohReceiver:
         """Hand every sample of one subscription's channel on, in batches, until it is closed."""
         drain_paced(*_reads(channel), handle, self._stop.is_set)
 
-    def _start_buffered_drain(self, channel: Any) -> None:
-        """Copy the samples out of `channel` between shares of their handling, on a thread of its own."""
+    def _start_buffered_drain(self, channel: Any, copy: Callable[[zenoh.Sample], _Copied | None]) -> None:
+        """Copy the samples out of `channel` (with `copy`) between shares of their handling, on a thread."""
         limit = self._config.queue_length
-        handlers = (self._copy, self._hand_on, self._note, self._drop)
+        handlers = (copy, self._hand_on, self._note, self._drop)
         arguments = (*_reads(channel), *handlers, self._stop.is_set, limit)
         threading.Thread(target=drain_buffered, args=arguments, name="zenoh-data", daemon=True).start()
 
