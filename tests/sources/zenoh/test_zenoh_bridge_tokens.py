@@ -1,8 +1,8 @@
 """The bridge's tokens are subscribed to once a bridge's sample is heard, and none declared before is missed.
 
 A router serves every subscription of tokens as it serves another subscriber: a fleet of 10,000
-rmw_zenoh robots starting at once lost 2.5-4 times more updates at the router while the exporter held
-a subscription to zenoh-bridge-ros2dds's tokens too, which no robot of that fleet declares. Here a real
+rmw_zenoh robots starting at once lost 1.3-3.3 times as many updates at the router while the exporter
+held a subscription to zenoh-bridge-ros2dds's tokens too, which no robot of that fleet declares. Here a real
 router, an rmw_zenoh robot, and then a bridge whose token is declared before its first sample.
 """
 

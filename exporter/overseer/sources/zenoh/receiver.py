@@ -9,8 +9,8 @@ retried until they are.
 
 The bridge's tokens are subscribed to once a sample in the bridge's key format is heard, with the
 tokens' history, so none is missed: a router serves every subscription of tokens as it serves another
-subscriber, and a fleet of 10,000 rmw_zenoh robots starting at once lost 2.5-4 times more updates at
-the router while the exporter held two (bench/README.md, 2026-11-29).
+subscriber, and a fleet of 10,000 rmw_zenoh robots starting at once lost 1.3-3.3 times as many updates
+at the router while the exporter held both from the start (bench/README.md, 2026-11-29).
 
 The samples and the tokens queue in channels that Zenoh fills without Python's interpreter lock, and a
 thread of ours drains each: a Python callback would hold Zenoh's receiving thread on the lock for every
