@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import multiprocessing
 import os
 import sqlite3
 import subprocess
 import time
+import tracemalloc
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,7 +31,7 @@ from overseer.history.store import (
     StoreSettings,
 )
 from overseer.levels import Level
-from overseer.model.events import Event, event_of_row, event_rows
+from overseer.model.events import Event, EventRow, event_of_row, event_rows
 
 DAY = 86400.0
 HOSTILE = [
@@ -339,6 +341,36 @@ def test_a_full_queue_drops_and_counts(tmp_path: Path) -> None:
     stats = store.stats()
     assert stats.dropped["queue_full"] == 31 and stats.written == 100
     assert 'overseer_events_dropped_total{reason="queue_full"} 31.0' in metrics(store)
+
+
+def test_queued_events_keep_no_tuple_of_their_own(tmp_path: Path) -> None:
+    # A fleet's first look queues hundreds of thousands of events while the model builds its components,
+    # tuples of the same size: rows kept as tuples left the model's memory full of holes once written.
+    store = EventStore(settings(tmp_path / "events.db"))  # not started: what is queued stays queued
+    count = 20_000
+    texts = [(1000.0 + i, f"robot{i}", f"/c{i}", f"message {i}", f'[["v","{i}"]]') for i in range(count)]
+    gc.collect()
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        rows: list[EventRow] = [
+            (at, robot, "level", name, "", 0, 2, message, values)
+            for at, robot, name, message, values in texts
+        ]
+        store.add_rows(rows)
+        del rows
+        gc.collect()
+        kept = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    # Nine references an event (72 bytes, and a list's spare room), not a 112-byte tuple and a reference.
+    assert kept / count < 100, f"{kept / count:.0f} bytes an event queued"
+    assert store.flush() == count
+    newest, _ = store.query(EventQuery(limit=2))
+    assert [(event["robot"], event["values"]) for event in newest] == [
+        ("robot19999", [{"key": "v", "value": "19999"}]),
+        ("robot19998", [{"key": "v", "value": "19998"}]),
+    ]
 
 
 def test_the_exporters_queue_holds_a_whole_fleet_first_heard(tmp_path: Path) -> None:

@@ -69,6 +69,7 @@ class Event(NamedTuple):
 # the exporter's store as rows, which cross a pipe for a fraction of what named tuples holding levels cost
 # (pickled and read back, 1.5 µs against 8).
 EventRow = tuple[float, str, str, str | None, str | None, int | None, int | None, str, str]
+ROW_FIELDS = len(get_args(EventRow))
 
 
 def event_rows(events: list[Event]) -> list[EventRow]:
