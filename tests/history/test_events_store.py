@@ -373,6 +373,17 @@ def test_queued_events_keep_no_tuple_of_their_own(tmp_path: Path) -> None:
     ]
 
 
+def test_a_row_of_the_wrong_length_is_refused_and_shifts_no_other(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    good = event_rows([level_event(1.0)])
+    with pytest.raises(ValueError, match="9 fields"):
+        store.add_rows([*good, good[0][:8]])  # type: ignore[list-item]
+    store.add_rows(event_rows([level_event(2.0)]))
+    assert store.flush() == 1
+    [event] = everything(store)
+    assert (event["time"], event["robot"], event["new_level"]) == (2.0, "robot1", 2)
+
+
 def test_the_exporters_queue_holds_a_whole_fleet_first_heard(tmp_path: Path) -> None:
     # 10,000 robots of 50 components first heard at once: 500,000 `appeared` events before any is written.
     history = EventHistory(EventsConfig(path=str(tmp_path / "events.db")), max_robots=10_000)

@@ -251,6 +251,23 @@ def test_a_shard_lists_only_the_robots_it_owns() -> None:
     assert [robot.name for robot in fleet.model.snapshot().robots] == ["a"]
 
 
+def test_robots_remembered_from_before_a_restart_share_their_components_keys() -> None:
+    # A component reported again keeps the key it was restored with: a tuple each would be 56 bytes of
+    # every component for as long as the exporter runs after a restart.
+    before = Fleet(robot_timeout=10)
+    for robot in ("r1", "r2"):
+        before.publish(robot, "/Power/Battery", "/Motor", level=0)
+    kept = before.model.heard(with_components=True)
+    after = Fleet(robot_timeout=10)
+    after.model.remember(kept)
+    after.publish("r1", "/Power/Battery", "/Motor", level=1)
+    first, second = after.model.snapshot().robots
+    for name in ("/Power/Battery", "/Motor"):
+        [key_1] = [key for key in first.components if key[0] == name]
+        [key_2] = [key for key in second.components if key[0] == name]
+        assert key_1 == (name, "") and key_1 is key_2 and first.components[key_1].key is key_2
+
+
 def test_a_clean_stop_keeps_what_robots_reported_and_a_restart_carries_on_from_it() -> None:
     before = Fleet(robot_timeout=10)
     before.publish("r1", "/Power/Battery", "/Motor", level=1)

@@ -68,8 +68,7 @@ _INSERT = (
     "INSERT INTO events (time, robot, kind, component, hardware_id, old_level, new_level, message,"
     " key_values) VALUES "
 )
-_ROW = "(?, ?, ?, ?, ?, ?, ?, ?, ?)"
-_FIELDS = _ROW.count("?")
+_ROW = "(" + ", ".join(["?"] * ROW_FIELDS) + ")"
 MAX_ROWS_PER_STATEMENT = 2_000
 
 
@@ -162,7 +161,12 @@ class EventStore:
                 rows = rows[: max(room, 0)]
                 if not rows:
                     return
-            self._queued_fields.extend(itertools.chain.from_iterable(rows))
+            queued = self._queued_fields
+            end = len(queued)
+            queued.extend(itertools.chain.from_iterable(rows))
+            if len(queued) - end != len(rows) * ROW_FIELDS:  # nothing marks where a row ends: check
+                del queued[end:]
+                raise ValueError(f"event rows of other than {ROW_FIELDS} fields")
             self._queued += len(rows)
 
     def start(self) -> None:
@@ -346,7 +350,7 @@ class EventStore:
 def _statement_rows(connection: sqlite3.Connection) -> int:
     """How many events one INSERT writes: `MAX_ROWS_PER_STATEMENT`, fewer where SQLite binds fewer values."""
     bound = connection.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
-    return max(1, min(MAX_ROWS_PER_STATEMENT, bound // _FIELDS))
+    return max(1, min(MAX_ROWS_PER_STATEMENT, bound // ROW_FIELDS))
 
 
 def _statement_sizes(rows: int, per_statement: int) -> Iterator[int]:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from overseer.model.state import ComponentKey
 
-MAX_SHARED_KEYS = 100_000  # names kept for sharing; past it the table starts again (memory stays bounded)
+# Names kept for sharing: a fleet's robots of a few kinds report a few thousand. Past it the table starts
+# again: a name may be 1,024 characters, and the table keeps a name after every robot reporting it went.
+MAX_SHARED_KEYS = 10_000
 
 
 class ComponentKeys:
@@ -28,8 +30,8 @@ class ComponentKeys:
         key = self._keys.get(name)
         if key is None:
             if len(self._keys) >= self._capacity:
-                # A fleet of ever-new names (a hostile one) stops sharing what it had instead of growing
-                # the table: components keep their keys, only later robots get tuples of their own.
+                # A fleet of ever-new names (a hostile one) starts sharing anew instead of growing the
+                # table: components keep the keys they have, and later robots share new ones.
                 self._keys.clear()
             key = self._keys[name] = (name, "")
         return key

@@ -439,7 +439,8 @@ class FleetModel:
                     continue
                 last = now - max(0.0, wall - heard_at)
                 listing = None if state is None else state.listing
-                components = expected_components(listing, restored_components(remembered, last), now)
+                restored = restored_components(remembered, last, self._keys)
+                components = expected_components(listing, restored, now)
                 self._robots[name] = RobotState(
                     name,
                     transport,

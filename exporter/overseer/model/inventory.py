@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from overseer.levels import Level
+from overseer.model.component_keys import ComponentKeys
 from overseer.model.state import (
     Component,
     ComponentKey,
@@ -78,13 +79,16 @@ def listed_state(state: RobotState, listing: ListedRobot | None, now: float) -> 
 
 
 def restored_components(
-    remembered: Iterable[RememberedComponent], last: float
+    remembered: Iterable[RememberedComponent], last: float, keys: ComponentKeys
 ) -> dict[ComponentKey, Component]:
-    """Components remembered from before a restart, as last reported at `last` (on no feed of this run)."""
+    """Components remembered from before a restart, as last reported at `last` (on no feed of this run).
+
+    Their keys are the model's shared ones (`keys`): a component reported again keeps the key it had.
+    """
     restored: dict[ComponentKey, Component] = {}
     intern = sys.intern
     for name, hardware_id, level, message in remembered:
-        key = (intern(name), "")
+        key = keys.of(intern(name))
         if key not in restored and 0 <= level <= 3:
             restored[key] = Component(
                 key, _LEVELS[level], intern(message), intern(hardware_id), (), last, 0, ""

@@ -114,7 +114,7 @@ class ZenohReceiver:
         domain, formats = self._config.domain, self._config.key_formats
         # Declared without the lock held: `stop` may wait for it meanwhile.
         declared: list[zenoh.Subscriber[Any]] = []
-        for key_format in formats:
+        for key_format in dict.fromkeys(formats):  # each format once, however often it was given
             bridged = key_format == BRIDGE
             for key in data_subscriptions(domain, (key_format,)):
                 subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
@@ -158,8 +158,12 @@ class ZenohReceiver:
             key = bridge_liveliness_subscription()
             if session is None or key in self.token_subscriptions:
                 return
-            # Under the lock: `stop` undeclares what is declared, and takes the lock to do so.
-            self._declared.append(self._subscribe_tokens(session, key))
+            try:
+                # Under the lock: `stop` undeclares what is declared, and takes the lock to do so.
+                self._declared.append(self._subscribe_tokens(session, key))
+            except Exception:  # called from a drain, which must go on: the next bridge's sample tries again
+                self._bridge_heard = False
+                log.exception("failed to subscribe to zenoh-bridge-ros2dds's tokens")
 
     def _bridged_copy(self, sample: zenoh.Sample) -> _Copied | None:
         """`_copy` for a sample in the bridge's key format: the first one subscribes to its tokens."""
