@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gc
+import sys
 from collections.abc import Callable
 
 import pytest
@@ -212,6 +214,18 @@ def test_a_changed_level_renders_its_components_level_changes_and_message_lines(
     fast, reference = rendering.both(TEXT)
     assert fast == reference
     assert sorted(rendered) == [("changes", 1), ("level", 1), ("message", 1), ("values", 1)]
+
+
+def test_a_record_replaced_after_a_render_is_kept_alive_by_nothing_but_its_reader() -> None:
+    # Between two scrapes a minute apart a fleet replaces nearly half its records: were the cache to
+    # hold the ones it rendered, each would outlive its replacement until the next scrape.
+    rendering, change_a_value, _ = three_components_rendered(1)
+    snapshot = rendering.exposition._model.snapshot()
+    record = next(robot for robot in snapshot.robots if robot.name == "robot9").components[("/c1", "")]
+    del snapshot
+    gc.collect()
+    change_a_value()
+    assert sys.getrefcount(record) == 2  # the name here and getrefcount's argument
 
 
 def test_a_family_whose_lines_come_out_the_same_keeps_its_compressed_piece() -> None:

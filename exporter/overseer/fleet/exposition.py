@@ -16,6 +16,7 @@ import threading
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import cast
 
 from prometheus_client.utils import floatToGoString
@@ -44,11 +45,12 @@ class _RobotLines:
     `levels`, `changes`, `values` and `messages` hold every component's lines of each family, deflated
     (`deflated`: a tenth of the memory, and a scrape sends them as they are); component i's lines of
     family k start at `offsets[(count + 1) * k + i]` of the family's text, where `count` components
-    were rendered (`offsets[(count + 1) * k + count]` is the family's length). `components` are the
-    records they were rendered from (None for those missing from their feed's latest message), and
-    `component_levels` their levels as rendered: a component whose record is the same object again
-    renders the same lines (when the robot's up, timing and staleness did not change), so they are
-    copied instead, and a new record renders again only the families whose fields it changed.
+    were rendered (`offsets[(count + 1) * k + count]` is the family's length). `stamps` say what they
+    were rendered from, two a component (`_stamps`), and `component_levels` their levels as rendered:
+    a component with the same stamps renders the same lines (when the robot's up, timing and staleness
+    did not change), so they are copied instead, and one whose values alone changed renders its values
+    again. The records themselves are not kept: a fleet scraped a minute apart replaces nearly half of
+    them meanwhile, and the cache would keep each old one alive (about 400 bytes) beside the new.
     """
 
     signature: tuple[tuple[int, float], bool, tuple[int, ...]]
@@ -61,7 +63,7 @@ class _RobotLines:
     changes: Deflated
     values: Deflated
     messages: Deflated
-    components: tuple[Component | None, ...]
+    stamps: array[int]
     component_levels: bytes
     offsets: array[int]
 
@@ -188,8 +190,9 @@ def _lines_for(
     levels = snapshot.component_levels(robot, up)
     items = list(robot.components.items())
     lines = _ComponentLines(items, levels, f'robot="{render.escape(robot.name)}"', render)
+    stamps = _stamps(items, missing)
     to_render = (
-        _lines_to_render(copyable.components, copyable.component_levels, items, missing, levels)
+        _lines_to_render(copyable.stamps, copyable.component_levels, stamps, levels)
         if copyable is not None
         else (list(range(len(items))),) * FAMILIES
     )
@@ -199,12 +202,6 @@ def _lines_for(
         for family, (indices, render_line) in enumerate(
             zip(to_render, (lines.level, lines.changes, lines.values, lines.message), strict=True)
         )
-    )
-    # A component missing from its feed's latest message renders by its own time: never copied (None).
-    records = (
-        tuple(component if key not in missing else None for key, component in items)
-        if missing
-        else tuple(robot.components.values())
     )
     return _RobotLines(
         signature,
@@ -217,7 +214,7 @@ def _lines_for(
         changes,
         values,
         messages,
-        records,
+        stamps,
         bytes(levels),
         offsets,
     )
@@ -226,42 +223,55 @@ def _lines_for(
 FAMILIES = 4  # per-component families: levels, level changes, values, status messages
 
 
+def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[ComponentKey]) -> array[int]:
+    """Two hashes a component, of what its lines are rendered from: all but its values, and its values.
+
+    A component missing from its feed's latest message renders by its own time, so it is never copied:
+    its first stamp is -1, which no hash is. Two records whose stamps agree render the same lines but
+    for a hash collision (one in 2**64 a change, and then its lines are a change late).
+    """
+    stamps: list[int] = []
+    add = stamps.extend
+    for key, component in items:
+        add((MISSING if key in missing else hash(_RENDERED_FROM(component)), hash(component.values)))
+    return array("q", stamps)
+
+
+# What a component's lines are rendered from but its values (and its level as judged, kept beside).
+_RENDERED_FROM = itemgetter(
+    *(Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes"))
+)
+MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
+
+
 def _lines_to_render(
-    reusable: tuple[Component | None, ...],
-    reusable_levels: bytes,
-    items: list[tuple[ComponentKey, Component]],
-    missing: frozenset[ComponentKey],
-    levels: list[Level],
+    reusable: array[int], reusable_levels: bytes, stamps: array[int], levels: list[Level]
 ) -> tuple[list[int], list[int], list[int], list[int]]:
     """The components to render again in each family, in order; the lines of the others can be copied.
 
-    `reusable` are the records the cached lines were rendered from, at the same indices, and
-    `reusable_levels` their levels then. A record replaced by another renders again only the families
-    whose fields changed: in a fleet most changes are values (a voltage, a temperature), and then the
-    levels, level changes and status messages are copied, compressed, as they were.
+    `reusable` are the stamps of the records the cached lines were rendered from (`_stamps`), at the
+    same indices, and `reusable_levels` their levels then. A component whose values alone changed
+    renders its values again, and the levels, level changes and status messages are copied, compressed,
+    as they were: in a fleet most changes are values (a voltage, a temperature).
     """
     level_lines: list[int] = []
     change_lines: list[int] = []
     value_lines: list[int] = []
     message_lines: list[int] = []
-    for index, (old, (key, component)) in enumerate(zip(reusable, items, strict=False)):
-        if old is component and key not in missing:
-            continue
-        if old is None or key in missing or old.key != key or old.hardware_id != component.hardware_id:
+    count = min(len(reusable), len(stamps)) // 2
+    for index in range(count):
+        first = 2 * index
+        if stamps[first] != reusable[first] or stamps[first] == MISSING:
             for family in (level_lines, change_lines, value_lines, message_lines):
                 family.append(index)
             continue
-        level_moved = levels[index] != reusable_levels[index]
-        if level_moved:
-            level_lines.append(index)
-        if old.level_changes != component.level_changes:
-            change_lines.append(index)
-        if old.values != component.values:
-            value_lines.append(index)
         # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
-        if level_moved or old.level != component.level or old.message != component.message:
+        if levels[index] != reusable_levels[index]:
+            level_lines.append(index)
             message_lines.append(index)
-    new = range(len(reusable), len(items))
+        if stamps[first + 1] != reusable[first + 1]:
+            value_lines.append(index)
+    new = range(count, len(stamps) // 2)
     for family in (level_lines, change_lines, value_lines, message_lines):
         family.extend(new)
     return level_lines, change_lines, value_lines, message_lines
@@ -281,7 +291,7 @@ def _family_lines(
     none of whose lines changed, or whose lines come out the same bytes, is the cached piece itself.
     """
     if cached is not None:
-        cached_count = len(cached.components)
+        cached_count = len(cached.stamps) // 2
         cached_piece = cached.family(family)
         old = cached.offsets
         base = (cached_count + 1) * family
