@@ -16,7 +16,8 @@ import threading
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
-from operator import itemgetter
+from itertools import compress
+from operator import itemgetter, ne
 from typing import cast
 
 from prometheus_client.utils import floatToGoString
@@ -188,11 +189,12 @@ def _lines_for(
     )
     missing = robot.missing
     levels = snapshot.component_levels(robot, up)
+    judged = bytes(levels)
     items = list(robot.components.items())
     lines = _ComponentLines(items, levels, f'robot="{render.escape(robot.name)}"', render)
     stamps = _stamps(items, missing)
     to_render = (
-        _lines_to_render(copyable.stamps, copyable.component_levels, stamps, levels)
+        _lines_to_render(copyable.stamps, copyable.component_levels, stamps, judged)
         if copyable is not None
         else (list(range(len(items))),) * FAMILIES
     )
@@ -215,7 +217,7 @@ def _lines_for(
         values,
         messages,
         stamps,
-        bytes(levels),
+        judged,
         offsets,
     )
 
@@ -226,55 +228,63 @@ FAMILIES = 4  # per-component families: levels, level changes, values, status me
 def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[ComponentKey]) -> array[int]:
     """Two hashes a component, of what its lines are rendered from: all but its values, and its values.
 
-    A component missing from its feed's latest message renders by its own time, so it is never copied:
-    its first stamp is -1, which no hash is. Two records whose stamps agree render the same lines but
-    for a hash collision (one in 2**64 a change, and then its lines are a change late).
+    The first hash of each of the n components, then the second of each. A component missing from its
+    feed's latest message renders by its own time, so it is never copied: its first stamp is -1, which
+    no hash is. Two records whose stamps agree render the same lines but for a hash collision (one in
+    2**64 a change, and then its lines are a change late). Hashed by `map`, with no Python step a
+    component: a changed robot's components are stamped at every scrape.
     """
-    stamps: list[int] = []
-    add = stamps.extend
-    for key, component in items:
-        add((MISSING if key in missing else hash(_RENDERED_FROM(component)), hash(component.values)))
-    return array("q", stamps)
+    records = [component for _, component in items]
+    stamps = array("q", map(hash, map(_RENDERED_FROM, records)))
+    if missing:
+        for index, (key, _) in enumerate(items):
+            if key in missing:
+                stamps[index] = MISSING
+    stamps.extend(map(hash, map(_VALUES, records)))
+    return stamps
 
 
 # What a component's lines are rendered from but its values (and its level as judged, kept beside).
 _RENDERED_FROM = itemgetter(
     *(Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes"))
 )
+_VALUES = itemgetter(Component._fields.index("values"))
 MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
 
 
 def _lines_to_render(
-    reusable: array[int], reusable_levels: bytes, stamps: array[int], levels: list[Level]
+    reusable: array[int], reusable_levels: bytes, stamps: array[int], levels: bytes
 ) -> tuple[list[int], list[int], list[int], list[int]]:
     """The components to render again in each family, in order; the lines of the others can be copied.
 
     `reusable` are the stamps of the records the cached lines were rendered from (`_stamps`), at the
-    same indices, and `reusable_levels` their levels then. A component whose values alone changed
-    renders its values again, and the levels, level changes and status messages are copied, compressed,
-    as they were: in a fleet most changes are values (a voltage, a temperature).
+    same indices, and `reusable_levels` their levels then (`levels` are those now). A component whose
+    values alone changed renders its values again, and the levels, level changes and status messages
+    are copied, compressed, as they were: in a fleet most changes are values (a voltage, a temperature).
     """
-    level_lines: list[int] = []
-    change_lines: list[int] = []
-    value_lines: list[int] = []
-    message_lines: list[int] = []
-    count = min(len(reusable), len(stamps)) // 2
-    for index in range(count):
-        first = 2 * index
-        if stamps[first] != reusable[first] or stamps[first] == MISSING:
-            for family in (level_lines, change_lines, value_lines, message_lines):
-                family.append(index)
-            continue
-        # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
-        if levels[index] != reusable_levels[index]:
-            level_lines.append(index)
-            message_lines.append(index)
-        if stamps[first + 1] != reusable[first + 1]:
-            value_lines.append(index)
-    new = range(count, len(stamps) // 2)
-    for family in (level_lines, change_lines, value_lines, message_lines):
-        family.extend(new)
-    return level_lines, change_lines, value_lines, message_lines
+    old, new = len(reusable) // 2, len(stamps) // 2
+    count = min(old, new)
+    indices = range(count)
+    # Whole runs of stamps compared at once: most of a changed robot is unchanged.
+    firsts, old_firsts = stamps[:count], reusable[:count]
+    if firsts == old_firsts and MISSING not in firsts:
+        every: list[int] = []
+    else:
+        every = [i for i in indices if firsts[i] != old_firsts[i] or firsts[i] == MISSING]
+    seconds, old_seconds = stamps[new : new + count], reusable[old : old + count]
+    revalued = [] if seconds == old_seconds else list(compress(indices, map(ne, seconds, old_seconds)))
+    # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
+    judged, old_judged = levels[:count], reusable_levels[:count]
+    moved = [] if judged == old_judged else list(compress(indices, map(ne, judged, old_judged)))
+    added = range(count, new)
+    level_lines = sorted({*every, *moved}) if every and moved else every or moved
+    value_lines = sorted({*every, *revalued}) if every and revalued else every or revalued
+    return (
+        [*level_lines, *added],
+        [*every, *added],
+        [*value_lines, *added],
+        [*level_lines, *added],
+    )
 
 
 def _family_lines(
