@@ -216,6 +216,22 @@ def test_a_changed_level_renders_its_components_level_changes_and_message_lines(
     assert sorted(rendered) == [("changes", 1), ("level", 1), ("message", 1), ("values", 1)]
 
 
+def test_a_level_that_went_and_came_back_between_renders_renders_its_two_changes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Its level, message and values are as they were; only its count of level changes is not.
+    rendering, _, change_a_level = three_components_rendered(1)
+    model = rendering.exposition._model
+    three = tuple(DiagnosticStatus(1, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
+    rendered, _ = record_rendering(monkeypatch)
+    change_a_level()
+    model.apply("robot9", DiagnosticArray(0, 0, "", three), "dds")
+    fast, reference = rendering.both(TEXT)
+    assert fast == reference
+    assert b'ros_diagnostics_level_changes_total{component="/c1",hardware_id="",robot="robot9"} 2.0' in fast
+    assert ("changes", 1) in rendered
+
+
 def test_a_record_replaced_after_a_render_is_kept_alive_by_nothing_but_its_reader() -> None:
     # Between two scrapes a minute apart a fleet replaces nearly half its records: were the cache to
     # hold the ones it rendered, each would outlive its replacement until the next scrape.
