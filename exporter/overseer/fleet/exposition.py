@@ -2,7 +2,8 @@
 
 Each robot's lines are kept between scrapes and rebuilt only when the robot's state or the set of its
 stale components changed (most robots merely republished the same diagnostics); within a changed robot
-only the components whose record changed are rendered again. They are kept deflated (`deflated`), so
+only the components whose stamps (hashes of what their lines are rendered from) or judged levels
+changed are rendered again. They are kept deflated (`deflated`), so
 that a gzip scrape sends the unchanged robots' bytes as they are. The lines are the same bytes in every
 format a scrape may ask for (`exposition_formats`), so one cached part serves the text format and
 OpenMetrics alike; `assembler` adds the headers. The tests hold the result byte-identical to
@@ -225,31 +226,31 @@ def _lines_for(
 FAMILIES = 4  # per-component families: levels, level changes, values, status messages
 
 
+# What a component's lines are rendered from but its values (and its level as judged, kept beside).
+_RENDERED_FROM = itemgetter(
+    *(Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes"))
+)
+_VALUES = itemgetter(Component._fields.index("values"))
+_MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
+
+
 def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[ComponentKey]) -> array[int]:
     """Two hashes a component, of what its lines are rendered from: all but its values, and its values.
 
     The first hash of each of the n components, then the second of each. A component missing from its
     feed's latest message renders by its own time, so it is never copied: its first stamp is -1, which
     no hash is. Two records whose stamps agree render the same lines but for a hash collision (one in
-    2**64 a change, and then its lines are a change late). Hashed by `map`, with no Python step a
-    component: a changed robot's components are stamped at every scrape.
+    2**64 a change on a 64-bit build, and then its lines are a change late). Hashed by `map`, with no
+    Python step a component: a changed robot's components are stamped at every scrape.
     """
     records = [component for _, component in items]
     stamps = array("q", map(hash, map(_RENDERED_FROM, records)))
     if missing:
         for index, (key, _) in enumerate(items):
             if key in missing:
-                stamps[index] = MISSING
+                stamps[index] = _MISSING
     stamps.extend(map(hash, map(_VALUES, records)))
     return stamps
-
-
-# What a component's lines are rendered from but its values (and its level as judged, kept beside).
-_RENDERED_FROM = itemgetter(
-    *(Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes"))
-)
-_VALUES = itemgetter(Component._fields.index("values"))
-MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
 
 
 def _lines_to_render(
@@ -261,22 +262,24 @@ def _lines_to_render(
     same indices, and `reusable_levels` their levels then (`levels` are those now). A component whose
     values alone changed renders its values again, and the levels, level changes and status messages
     are copied, compressed, as they were: in a fleet most changes are values (a voltage, a temperature).
+    Any other change (a message, a level, a hardware_id) renders all four of the component's families:
+    a third stamp to tell a message apart would cost every component 8 bytes more.
     """
-    old, new = len(reusable) // 2, len(stamps) // 2
-    count = min(old, new)
+    old_count, new_count = len(reusable) // 2, len(stamps) // 2
+    count = min(old_count, new_count)
     indices = range(count)
     # Whole runs of stamps compared at once: most of a changed robot is unchanged.
     firsts, old_firsts = stamps[:count], reusable[:count]
-    if firsts == old_firsts and MISSING not in firsts:
+    if firsts == old_firsts and _MISSING not in firsts:
         every: list[int] = []
     else:
-        every = [i for i in indices if firsts[i] != old_firsts[i] or firsts[i] == MISSING]
-    seconds, old_seconds = stamps[new : new + count], reusable[old : old + count]
+        every = [i for i in indices if firsts[i] != old_firsts[i] or firsts[i] == _MISSING]
+    seconds, old_seconds = stamps[new_count : new_count + count], reusable[old_count : old_count + count]
     revalued = [] if seconds == old_seconds else list(compress(indices, map(ne, seconds, old_seconds)))
     # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
     judged, old_judged = levels[:count], reusable_levels[:count]
     moved = [] if judged == old_judged else list(compress(indices, map(ne, judged, old_judged)))
-    added = range(count, new)
+    added = range(count, new_count)
     level_lines = sorted({*every, *moved}) if every and moved else every or moved
     value_lines = sorted({*every, *revalued}) if every and revalued else every or revalued
     return (
