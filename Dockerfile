@@ -1,6 +1,6 @@
 # The exporter, built from this repository with PyPI packages only, in two stages: a compiler builds the
-# wheel with the compiled status decoder and deflater, and the slim runtime installs it with the locked
-# dependencies.
+# wheel with the compiled status decoder, deflater and field hashes, and the slim runtime installs it with
+# the locked dependencies.
 
 # Build stage: the full image has gcc, Python's headers and zlib's. scripts/build-wheel fails unless the C
 # extensions built, so the runtime never falls back to pure Python.
@@ -25,6 +25,7 @@ RUN pip install --no-cache-dir --require-hashes -r /tmp/requirements/tools.txt \
     && pip check \
     && python3 -c "from overseer.codec import compiled; assert compiled.AVAILABLE, 'no compiled decoder'" \
     && python3 -c "from overseer.fleet import deflated; assert deflated.COMPILED, 'no compiled deflater'" \
+    && python3 -c "from overseer.fleet import stamps; assert stamps.COMPILED, 'no compiled field hashes'" \
     && rm -rf /tmp/requirements /tmp/dist
 
 RUN useradd --system --no-create-home overseer \

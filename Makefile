@@ -14,7 +14,7 @@ setup: $(VENV)/.installed
 # A fresh venv from the lock alone: the locked tools first (pip upgrades itself), then every locked
 # distribution, hashes checked, then the package itself from this tree with nothing left to resolve;
 # `pip check` proves the lock satisfies what the package and its extras ask for.
-$(VENV)/.installed: pyproject.toml setup.py exporter/overseer/codec/_cstatus.c exporter/overseer/fleet/_cdeflate.c $(LOCK)
+$(VENV)/.installed: pyproject.toml setup.py exporter/overseer/codec/_cstatus.c exporter/overseer/fleet/_cdeflate.c exporter/overseer/fleet/_cstamps.c $(LOCK)
 	./scripts/install-system-deps base
 	$(PYTHON) -m venv --clear $(VENV)
 	$(BIN)/pip install --quiet --require-hashes -r requirements/tools.txt

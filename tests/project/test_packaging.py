@@ -141,13 +141,15 @@ def test_package_built_from_dockerfile_sources_has_page_and_scripts_without_dock
     names = wheel_from_dockerfile_sources(tmp_path)
     assert any(re.fullmatch(r"overseer/codec/_cstatus\..*\.so", name) for name in names)
     assert any(re.fullmatch(r"overseer/fleet/_cdeflate\..*\.so", name) for name in names)
+    assert any(re.fullmatch(r"overseer/fleet/_cstamps\..*\.so", name) for name in names)
 
 
 def test_package_builds_without_a_c_compiler_leaving_out_the_compiled_extensions(tmp_path: Path) -> None:
     # A source install on a machine with no gcc: the extension is optional outside the image's build.
     names = wheel_from_dockerfile_sources(tmp_path, {**os.environ, "CC": str(tmp_path / "no-such-gcc")})
     assert not any(name.endswith(".so") for name in names)
-    assert {"overseer/codec/compiled.py", "overseer/fleet/deflated.py"} <= set(names)
+    fallbacks = {"overseer/codec/compiled.py", "overseer/fleet/deflated.py", "overseer/fleet/stamps.py"}
+    assert fallbacks <= set(names)
 
 
 def run(args: list[str], env: dict[str, str], cwd: Path | None = None) -> None:
@@ -182,6 +184,7 @@ def test_the_build_stage_wheel_runs_the_compiled_decoder_where_no_compiler_is(tm
     names = wheel_names(wheel)
     assert any(re.fullmatch(r"overseer/codec/_cstatus\..*\.so", name) for name in names)
     assert any(re.fullmatch(r"overseer/fleet/_cdeflate\..*\.so", name) for name in names)
+    assert any(re.fullmatch(r"overseer/fleet/_cstamps\..*\.so", name) for name in names)
 
     # Runtime stage: the runtime stage's installs, in a fresh venv with no compiler on PATH.
     runtime_bin = fresh_venv(tmp_path / "runtime")

@@ -18,7 +18,7 @@ from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import compress
-from operator import itemgetter, ne
+from operator import ne
 from typing import cast
 
 from prometheus_client.utils import floatToGoString
@@ -26,6 +26,7 @@ from prometheus_client.utils import floatToGoString
 from overseer.fleet.deflated import Deflated, deflate, inflate, join
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.fleet.metric_values import NumericValues
+from overseer.fleet.stamps import field_hashes
 from overseer.levels import Level, worst
 from overseer.model import Component, FleetModel, FleetSnapshot, RobotState
 from overseer.model.snapshot import RobotTiming
@@ -227,10 +228,10 @@ FAMILIES = 4  # per-component families: levels, level changes, values, status me
 
 
 # What a component's lines are rendered from but its values (and its level as judged, kept beside).
-_RENDERED_FROM = itemgetter(
-    *(Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes"))
+_RENDERED_FROM = bytes(
+    Component._fields.index(field) for field in ("key", "level", "message", "hardware_id", "level_changes")
 )
-_VALUES = itemgetter(Component._fields.index("values"))
+_VALUES = bytes([Component._fields.index("values")])
 _MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
 
 
@@ -240,16 +241,17 @@ def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[Comp
     The first hash of each of the n components, then the second of each. A component missing from its
     feed's latest message renders by its own time, so it is never copied: its first stamp is -1, which
     no hash is. Two records whose stamps agree render the same lines but for a hash collision (one in
-    2**64 a change on a 64-bit build, and then its lines are a change late). Hashed by `map`, with no
-    Python step a component: a changed robot's components are stamped at every scrape.
+    2**64 a change on a 64-bit build, and then its lines are a change late). Hashed in C where it was
+    built (`stamps`): a changed robot's components are stamped at every scrape.
     """
-    records = [component for _, component in items]
-    stamps = array("q", map(hash, map(_RENDERED_FROM, records)))
+    records = tuple(component for _, component in items)
+    stamps: array[int] = array("q")
+    stamps.frombytes(field_hashes(records, _RENDERED_FROM))
     if missing:
         for index, (key, _) in enumerate(items):
             if key in missing:
                 stamps[index] = _MISSING
-    stamps.extend(map(hash, map(_VALUES, records)))
+    stamps.frombytes(field_hashes(records, _VALUES))
     return stamps
 
 

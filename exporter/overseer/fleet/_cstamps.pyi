@@ -1,0 +1,3 @@
+"""Types of the compiled field hashes (`_cstamps.c`)."""
+
+def field_hashes(records: tuple[tuple[object, ...], ...], fields: bytes, /) -> bytes: ...
