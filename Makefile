@@ -77,4 +77,4 @@ screenshot: setup system-deps
 	PYTHON=$(BIN)/python ./scripts/screenshot
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build exporter/overseer/codec/*.so
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build exporter/overseer/codec/*.so exporter/overseer/fleet/*.so

@@ -8,6 +8,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <stdint.h>
+#include <string.h>
 
 #if SIZEOF_PY_UHASH_T > 4
 #define PRIME_1 ((Py_uhash_t)11400714785074694791ULL)
@@ -21,8 +22,9 @@
 #define ROTATE(x) (((x) << 13) | ((x) >> 19))
 #endif
 
-/* records: a tuple of tuples (a tuple, so that hashing an item cannot take a record away);
- * fields: bytes, each the index of a field, one at least. */
+/* records: a tuple of tuples (a tuple, so that hashing an item cannot take a record away), read as
+ * tuples (a named tuple's fields, not an overridden __getitem__); fields: bytes, each the index of a
+ * field, one at least. */
 static PyObject *field_hashes(PyObject *module, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 2 || !PyTuple_Check(args[0]) || !PyBytes_Check(args[1])) {
         PyErr_SetString(PyExc_TypeError, "field_hashes(records: tuple, fields: bytes)");
@@ -36,9 +38,10 @@ static PyObject *field_hashes(PyObject *module, PyObject *const *args, Py_ssize_
         return NULL;
     }
     Py_ssize_t count = PyTuple_GET_SIZE(records);
+    if (count > PY_SSIZE_T_MAX / (Py_ssize_t)sizeof(int64_t)) return PyErr_NoMemory();
     PyObject *out = PyBytes_FromStringAndSize(NULL, count * (Py_ssize_t)sizeof(int64_t));
     if (out == NULL) return NULL;
-    int64_t *hashes = (int64_t *)PyBytes_AS_STRING(out);
+    char *hashes = PyBytes_AS_STRING(out);
     for (Py_ssize_t index = 0; index < count; index++) {
         PyObject *record = PyTuple_GET_ITEM(records, index);
         if (!PyTuple_Check(record)) {
@@ -64,7 +67,8 @@ static PyObject *field_hashes(PyObject *module, PyObject *const *args, Py_ssize_
         }
         hash += (Py_uhash_t)field_count ^ (PRIME_5 ^ 3527539UL);
         if (hash == (Py_uhash_t)-1) hash = 1546275796;
-        hashes[index] = (int64_t)(Py_hash_t)hash;
+        int64_t stamp = (int64_t)(Py_hash_t)hash;
+        memcpy(hashes + index * (Py_ssize_t)sizeof stamp, &stamp, sizeof stamp); /* no alignment assumed */
     }
     return out;
 }
