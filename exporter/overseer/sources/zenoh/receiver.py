@@ -115,15 +115,13 @@ class ZenohReceiver:
         # Declared without the lock held: `stop` may wait for it meanwhile.
         declared: list[zenoh.Subscriber[Any]] = []
         for key_format in dict.fromkeys(formats):  # each format once, however often it was given
-            bridged = key_format == BRIDGE
+            copy = self._bridged_copy if key_format == BRIDGE else self._copy
             for key in data_subscriptions(domain, (key_format,)):
                 subscriber = session.declare_subscriber(key, FifoChannel(self._config.queue_length))
                 declared.append(subscriber)
                 if self._on_dropped is None:
-                    handle = self._bridged_sample if bridged else self._sample
-                    self._start_drain(subscriber.handler, handle, "zenoh-data")
+                    self._start_drain(subscriber.handler, self._handing_on(copy), "zenoh-data")
                 else:
-                    copy = self._bridged_copy if bridged else self._copy
                     self._start_buffered_drain(subscriber.handler, copy)
         if RMW_ZENOH in formats:
             declared.append(self._subscribe_tokens(session, liveliness_subscription(domain)))
@@ -171,12 +169,6 @@ class ZenohReceiver:
             self._bridge_heard = True
             self._subscribe_bridge_tokens()
         return self._copy(sample)
-
-    def _bridged_sample(self, sample: zenoh.Sample) -> None:
-        """`_sample` for a sample in the bridge's key format: the first one subscribes to its tokens."""
-        copied = self._bridged_copy(sample)
-        if copied is not None:
-            self._hand_on(copied)
 
     def _open(self) -> zenoh.Session | None:
         delay = RETRY_MIN_SECONDS
@@ -239,10 +231,15 @@ class ZenohReceiver:
         except Exception:  # the drain must go on
             log.exception("failed to count %d dropped samples", len(samples))
 
-    def _sample(self, sample: zenoh.Sample) -> None:
-        copied = self._copy(sample)
-        if copied is not None:
-            self._hand_on(copied)
+    def _handing_on(self, copy: Callable[[zenoh.Sample], _Copied | None]) -> Callable[[zenoh.Sample], None]:
+        """A drain's handler: each sample copied with `copy`, then handed on."""
+
+        def handle(sample: zenoh.Sample) -> None:
+            copied = copy(sample)
+            if copied is not None:
+                self._hand_on(copied)
+
+        return handle
 
     def _token(self, sample: zenoh.Sample) -> None:
         try:
