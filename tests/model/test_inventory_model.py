@@ -286,3 +286,33 @@ def test_a_clean_stop_keeps_what_robots_reported_and_a_restart_carries_on_from_i
     assert after.take() == []
     after.publish("r1", "/Power/Battery", "/Motor", level=2)
     assert sorted(after.take()) == [("level", "r1", "/Motor"), ("level", "r1", "/Power/Battery")]
+
+
+def test_a_robot_that_was_only_a_moved_feed_is_forgotten_as_reattributed_with_an_event() -> None:
+    fleet = Fleet()
+    fleet.publish("domain0", "drive: Motor")
+    fleet.check()
+    fleet.take()
+    fleet.model.forget_feed("domain0", "writer", last=True)
+    fleet.check()
+    snapshot = fleet.model.snapshot()
+    assert snapshot.find("domain0") is None
+    assert snapshot.forgotten_counts == {"reattributed": 1}
+    assert fleet.take() == [("reattributed", "domain0", None)]
+
+
+def test_a_moved_feed_leaves_the_robots_other_feeds_and_a_listed_robot_goes_down_with_its_last() -> None:
+    fleet = Fleet()
+    fleet.model.set_inventory(Inventory({"listed": ListedRobot()}))
+    fleet.publish("shared", "drive: Motor")
+    fleet.model.apply(
+        "shared", DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "Disk", "ok", "", ()),)), "dds", feed="other"
+    )
+    fleet.publish("listed", "drive: Motor")
+    fleet.model.forget_feed("shared", "writer", last=False)
+    fleet.model.forget_feed("listed", "writer", last=True)
+    snapshot, shared = fleet.robot("shared")
+    _, listed = fleet.robot("listed")
+    assert list(fleet.components("shared")) == ["Disk"] and snapshot.robot_up(shared)
+    assert fleet.components("listed") == {} and not snapshot.robot_up(listed)
+    assert snapshot.forgotten_counts == {}

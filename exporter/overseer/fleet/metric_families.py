@@ -117,7 +117,8 @@ ROBOTS_FORGOTTEN = MetricFamily(
     "overseer_robots_forgotten",
     "counter",
     "Robots forgotten, by reason: expired (silent for expire_after, not in the inventory), retired (by "
-    "overseer robots retire) or unlisted (removed from the inventory, never heard).",
+    "overseer robots retire), unlisted (removed from the inventory, never heard) or reattributed (named by "
+    "a publisher whose node later named another robot).",
     ("reason",),
 )
 SOURCE_ERRORS = MetricFamily(
@@ -163,5 +164,5 @@ EXPORTER_FAMILIES = (
     BUILD_INFO,
     WEB_INFO,
 )
-FORGET_REASONS = ("expired", "retired", "unlisted")
+FORGET_REASONS = ("expired", "retired", "unlisted", "reattributed")
 CONTRACT_FAMILIES = FLEET_FAMILIES + EXPORTER_FAMILIES

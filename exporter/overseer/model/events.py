@@ -17,6 +17,7 @@ EventKind = Literal[
     "expired",
     "retired",
     "unlisted",
+    "reattributed",
     "maintenance_start",
     "maintenance_end",
 ]

@@ -373,6 +373,25 @@ class FleetModel:
                 kept = {k: c for k, c in state.components.items() if c.feed not in gone}
                 self._robots[robot] = _replace_components(state, kept, self._clock())
 
+    def forget_feed(self, robot: str, feed: str, last: bool) -> None:
+        """Drop what one feed told of `robot`: its publisher turned out to be another robot's node.
+
+        When it was the robot's `last` feed, the robot was only ever that publisher's: it is forgotten, or
+        if listed, down since now.
+        """
+        now, wall = self._clock(), self._wall_clock()
+        with self._lock:
+            state = self._robots.get(robot)
+            if state is None:
+                return
+            if last and state.listing is None:
+                del self._robots[robot]
+                self._forget(robot, "reattributed", wall)
+                return
+            kept = {k: c for k, c in state.components.items() if c.feed != feed}
+            state = _replace_components(state, kept, now)
+            self._robots[robot] = state._replace(left_at=now) if last and state.publisher_alive else state
+
     def expire(self) -> list[str]:
         """Forget robots and components silent for `expire_after`; returns the robots forgotten.
 

@@ -142,7 +142,7 @@ class Feed(NamedTuple):
         return self._replace(latest=latest, revision=revision, lossless=None not in latest)
 
 
-ForgetReason = Literal["expired", "retired", "unlisted"]
+ForgetReason = Literal["expired", "retired", "unlisted", "reattributed"]
 
 
 class Forgetting(NamedTuple):

@@ -129,11 +129,12 @@ class TransitionDetector:
         reason, at = forgetting
         if reason == "retired" or (reason == "expired" and not heard):
             return None
-        message = (
-            "removed from the inventory"
-            if reason == "unlisted"
-            else f"forgotten after {self._limits.expire_after:g} s of silence"
-        )
+        if reason == "unlisted":
+            message = "removed from the inventory"
+        elif reason == "reattributed":
+            message = "its publisher turned out to be another robot's node"
+        else:
+            message = f"forgotten after {self._limits.expire_after:g} s of silence"
         return Event(at, name, reason, message=message)
 
     def _robot_transitions(

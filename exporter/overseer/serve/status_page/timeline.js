@@ -109,6 +109,7 @@ function describe(event) {
     case "expired": return "expired";
     case "retired": return "retired";
     case "unlisted": return "removed from the inventory";
+    case "reattributed": return "reattributed to another robot";
     case "maintenance_start": return `maintenance starts (${valueOf(event, "author")}, until ${valueOf(event, "until")})`;
     case "maintenance_end": return "maintenance ends";
     default: return String(event.kind);
