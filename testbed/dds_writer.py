@@ -7,13 +7,21 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from cyclonedds._clayer import ddspy_write
+from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
+from cyclonedds.util import duration
 
+from overseer.codec.discovery_info import (
+    TOPIC,
+    NodeEntities,
+    ParticipantEntities,
+    encode_participant_entities,
+)
 from overseer.sources.dds.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds.source import BEST_EFFORT_QOS, ROS_DEFAULT_QOS
-from overseer.sources.dds.types import DiagnosticArray
+from overseer.sources.dds.types import DiagnosticArray, ParticipantEntitiesInfo
 
 
 class RawDiagnosticsWriter:
@@ -22,6 +30,11 @@ class RawDiagnosticsWriter:
     def __init__(self, writer: DataWriter[DiagnosticArray]) -> None:
         """Wrap a Cyclone DDS writer of the ROS 2 DiagnosticArray type."""
         self._writer = writer
+
+    @property
+    def guid(self) -> bytes:
+        """The writer's GUID, as the ROS graph lists it (16 bytes)."""
+        return self._writer.guid.bytes
 
     def wait_for_reader(self, timeout: float = 30.0) -> None:
         """Wait until a reader has matched this writer: what is written before that is lost (volatile)."""
@@ -58,5 +71,34 @@ def raw_diagnostics_writer(
     writer = DataWriter(participant, topic, qos=BEST_EFFORT_QOS if best_effort else ROS_DEFAULT_QOS)
     try:
         yield RawDiagnosticsWriter(writer)
+    finally:
+        del writer, topic
+
+
+class RosGraphWriter:
+    """Announces on `ros_discovery_info`, as an rmw does, that nodes own some writers."""
+
+    def __init__(self, participant: DomainParticipant, writer: DataWriter[ParticipantEntitiesInfo]) -> None:
+        """Write `participant`'s graph through `writer`."""
+        self._gid = participant.guid.bytes
+        self._writer = writer
+
+    def announce(self, *nodes: NodeEntities) -> None:
+        """Say that the participant's nodes are now `nodes` (with their writers' GUIDs)."""
+        payload = encode_participant_entities(ParticipantEntities(self._gid, nodes))
+        result = ddspy_write(self._writer._ref, payload + b"\x00" * (-len(payload) & 3))
+        if result < 0:
+            raise RuntimeError(f"writing the graph failed with DDS error {result}")
+
+
+@contextmanager
+def ros_graph_writer(domain_id: int) -> Iterator[RosGraphWriter]:
+    """A loopback-only `ros_discovery_info` writer (reliable, transient-local), deleted at the end."""
+    participant = _participant(domain_id)
+    qos = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.Durability.TransientLocal)
+    topic = Topic(participant, TOPIC, ParticipantEntitiesInfo, qos=qos)
+    writer = DataWriter(participant, topic, qos=qos)
+    try:
+        yield RosGraphWriter(participant, writer)
     finally:
         del writer, topic

@@ -4,7 +4,9 @@ Robots are found on the DDS built-in publication topic: every writer of `rt/<ns>
 `rt/<ns>/diagnostics` is robot `<ns>`, so a robot that starts later is picked up with no restart. A writer
 of an un-namespaced topic (`rt/diagnostics`, where diagnostic_updater publishes whatever its node's
 namespace) belongs to the robot its node's namespace names, read from the ROS graph the robot's rmw
-publishes (`node_graph.py`, `robot_naming.py`); on a domain given a `robot_name`, to that one robot.
+publishes (`node_graph.py`, `robot_naming.py`); on a domain given a `robot_name`, to that one robot. A
+writer whose node the graph has not told within a grace is the domain's robot's until the graph tells it
+(`reattribution.py`).
 Each writer is a feed of its robot: nodes sharing one robot's `/diagnostics` each send their own statuses.
 Samples are taken as raw CDR and decoded by `overseer.codec.cdr`, which is faster than the generic
 deserializer and turns a malformed payload into a counted `decode_error` instead of an exception.
@@ -50,6 +52,7 @@ from overseer.sources.dds.cyclone_log import CycloneWarnings
 from overseer.sources.dds.node_graph import NodeGraph
 from overseer.sources.dds.peers import peer_addresses
 from overseer.sources.dds.types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
+from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
@@ -58,8 +61,10 @@ log = logging.getLogger(__name__)
 TRANSPORT = "dds"
 DISCOVERY_INTERVAL_SECONDS = 0.2
 # How long a writer of an un-namespaced topic waits for its node to appear in the graph before it is taken
-# for the domain's robot (a DDS application that is no ROS 2 node never appears there).
-ATTRIBUTION_GRACE_SECONDS = 3.0
+# for the domain's robot (a DDS application that is no ROS 2 node never appears there). Fast DDS sends a
+# reader that matched after its graph was written that graph at its next heartbeat, up to 3 s later: a
+# little more than that, so that a node is seldom its domain's robot for a while.
+ATTRIBUTION_GRACE_SECONDS = 4.0
 MAX_PENDING_SAMPLES = 16  # per writer, while its robot is not known yet
 _TAKE_BATCH = 64
 _ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -87,6 +92,7 @@ class _Writer:
     ingest: PayloadIngest | None = None
     ignored: bool = False  # another worker's robot, the robot cap, or raw beside aggregated
     pending: list[bytes] = field(default_factory=list)  # samples heard before its robot was known
+    by_domain: bool = False  # the domain's robot's, as its node was not in the graph within the grace
 
 
 @dataclass
@@ -123,6 +129,7 @@ class DdsSource:
         self._lock = threading.Lock()  # the writers' pending samples and ingests, between listener threads
         self._robot_writers: dict[str, list[_Writer]] = {}  # robot → its live writers, across domains
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
+        self._moved = MovedFeeds(model)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -189,6 +196,7 @@ class DdsSource:
                 log.exception("DDS discovery failed; retrying")
 
     def _discover(self) -> None:
+        self._moved.forget(self._robot_writers.__contains__)
         for session in self._sessions:
             graph_changed = session.graph is not None and session.graph.poll()
             for sample in session.publications.take(N=256):
@@ -223,10 +231,13 @@ class DdsSource:
                 self._attribute(session)
 
     def _attribute(self, session: _DomainSession) -> None:
-        """Name the robots of un-namespaced topics' writers by their nodes, or the domain's after a grace."""
+        """Name the robots of un-namespaced topics' writers by their nodes, or the domain's after a grace.
+
+        A writer given the domain's robot moves to its node's robot when the graph names the node later.
+        """
         now = time.monotonic()
         for writer in list(session.writers.values()):
-            if writer.robot is not None or not writer.guid:
+            if (writer.robot is not None and not writer.by_domain) or not writer.guid:
                 continue
             node = None if session.graph is None else session.graph.node_of(writer.guid)
             if node is not None:
@@ -235,12 +246,36 @@ class DdsSource:
                     self._model.count_source_error(TRANSPORT, "invalid_namespace")
                     log.warning("node %r has an invalid namespace %r", node.name, node.namespace)
                     robot = session.naming.unnamespaced_robot
+                if writer.robot is not None:
+                    writer.by_domain = False
+                    if robot != writer.robot:
+                        self._move(writer, robot)
+                    continue
+            elif writer.robot is not None:
+                continue
             elif now - writer.seen_at >= ATTRIBUTION_GRACE_SECONDS:
                 robot = session.naming.unnamespaced_robot
-                log.info("a writer of %s is no ROS 2 node's: robot %s", writer.topic, robot)
+                writer.by_domain = True
+                log.info("a writer of %s is no ROS 2 node's as yet: robot %s", writer.topic, robot)
             else:
                 continue
             self._adopt(writer, robot)
+
+    def _move(self, writer: _Writer, robot: str) -> None:
+        """Follow a writer taken for its domain's robot as a feed of `robot`, its node's."""
+        old = writer.robot
+        assert old is not None
+        with self._lock:  # what arrives from now on waits in `pending` for the new ingest
+            followed, writer.ingest, writer.ignored = writer.ingest is not None, None, False
+        writers = [other for other in self._robot_writers.get(old, []) if other is not writer]
+        if writers:
+            self._robot_writers[old] = writers
+        else:
+            self._robot_writers.pop(old, None)
+        if followed:
+            self._moved.moved(old, _feed_name(writer))
+        log.info("writer %s of %s: a node of robot %s, not %s", writer.guid.hex(), writer.topic, robot, old)
+        self._adopt(writer, robot)
 
     def _adopt(self, writer: _Writer, robot: str) -> None:
         """Follow `writer` as a feed of `robot` (when this source follows the robot), its pending first."""
@@ -260,7 +295,7 @@ class DdsSource:
         if writer.kind == AGGREGATED and self._config.prefer_aggregated and robot not in self._aggregated:
             self._aggregated.add(robot)
             self._ignore_raw(robot)
-        feed = f"{writer.topic}@{writer.guid.hex()}"
+        feed = _feed_name(writer)
         ingest = PayloadIngest(self._model, robot, TRANSPORT, writer.topic, cdr.WIRE_FORMAT, feed)
         while True:  # what arrived meanwhile, in order, before new samples go straight to the ingest
             with self._lock:
@@ -363,6 +398,11 @@ class DdsSource:
             else:
                 writer.pending[-1] = data  # the newest says the most
             return None
+
+
+def _feed_name(writer: _Writer) -> str:
+    """The feed a writer's samples are of in the model: one per writer of a topic."""
+    return f"{writer.topic}@{writer.guid.hex()}"
 
 
 def _ingest(ingest: PayloadIngest, payload: bytes, topic: str) -> None:

@@ -5,7 +5,9 @@ Robots are found in the ROS graph: every topic `<ns>/diagnostics_agg` or `<ns>/d
 A message on an un-namespaced topic (diagnostic_updater publishes on the absolute `/diagnostics` whatever
 its node's namespace) belongs to the robot its publisher's node names: rcl tells each message's publisher
 GID (`rcl_take.py`), the graph each publisher's node. Each publisher is a feed of its robot, whose bytes go
-to the same ingest as every transport's (skip-unchanged, the compiled decoder, the caps).
+to the same ingest as every transport's (skip-unchanged, the compiled decoder, the caps). A publisher whose
+node the graph has not told within a grace is the domain's robot's until the graph tells it
+(`reattribution.py`).
 
 A topic's subscription is reliable while every publisher of it is, best-effort from the first best-effort
 one on (a reliable subscription never hears it). The graph also tells when a robot's diagnostics
@@ -34,6 +36,7 @@ from overseer.config.ros2 import Ros2Config
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.ros2 import node as ros_node
 from overseer.sources.ros2.rcl_take import RawTaker, wake_on_new_message
@@ -44,10 +47,17 @@ log = logging.getLogger(__name__)
 TRANSPORT = "ros2"
 MESSAGE_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 DISCOVERY_PERIOD_SECONDS = 0.5
-ATTRIBUTION_GRACE_SECONDS = 3.0  # a publisher whose node the graph does not tell by then: the domain's robot
+# A publisher whose node the graph does not tell by then is the domain's robot's: a little more than Fast
+# DDS's heartbeat period (3 s), at which a reader that matched after a node's graph was written hears it.
+ATTRIBUTION_GRACE_SECONDS = 4.0
+# How long a publisher taken for the domain's robot is looked for in the graph, each discovery, until its
+# node is told (a DDS application that is no ROS 2 node never is).
+REATTRIBUTION_WINDOW_SECONDS = 60.0
 MAX_PENDING_MESSAGES = 16  # per publisher, while its robot is not known yet
 QUEUE_DEPTH = 10  # a topic's messages between two takes: every node of a robot may publish /diagnostics
-_UNKNOWN_NAMESPACE = "_NODE_NAMESPACE_UNKNOWN_"  # what rclpy says before a publisher's node is known
+# What rclpy says of a publisher's node before its participant's graph has told it: unknown when the graph
+# lists the participant but not the publisher, a bare DDS application when it lists nothing of it as yet.
+_UNKNOWN_NAMESPACES = frozenset({"_NODE_NAMESPACE_UNKNOWN_", "_CREATED_BY_BARE_DDS_APP_"})
 
 
 def subscription_qos(reliable: bool) -> QoSProfile:
@@ -68,6 +78,7 @@ class _Publisher:
     robot: str | None
     seen_at: float  # monotonic
     in_graph: bool = False  # adopted from the graph, which then tells when it leaves
+    by_domain: bool = False  # the domain's robot's, as its node was not in the graph within the grace
     ingest: PayloadIngest | None = None
     ignored: bool = False  # another worker's robot, the robot cap, or raw beside aggregated
     pending: list[bytes] = field(default_factory=list)
@@ -124,6 +135,7 @@ class Ros2Source:
         self._taker: threading.Thread | None = None
         self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) in the graph
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
+        self._moved = MovedFeeds(model)
 
     def start(self) -> None:
         """Join the graph, take messages as they arrive, and look for robots every period from now on."""
@@ -167,6 +179,7 @@ class Ros2Source:
         ros = self._ros
         if ros is None:
             return
+        self._moved.forget(self._robot_publishers.__contains__)
         node = ros.node
         for name, types in node.get_topic_names_and_types():
             if name in self._topics or name in self._ignored:
@@ -186,9 +199,13 @@ class Ros2Source:
             if robot is not None and parsed.kind == RAW and self._prefers_aggregated(name, parsed.kind):
                 continue  # a namespaced robot's raw topic is not even read beside its aggregator's
             self._follow(ros, name, parsed.kind, robot)
+        recent = time.monotonic() - REATTRIBUTION_WINDOW_SECONDS
         for topic in list(self._topics.values()):
             count = node.count_publishers(topic.name)
-            unknown = any(publisher.robot is None for publisher in topic.publishers.values())
+            unknown = any(
+                publisher.robot is None or (publisher.by_domain and publisher.seen_at > recent)
+                for publisher in topic.publishers.values()
+            )
             if count != topic.graph_count or topic.dirty or unknown:
                 topic.graph_count = count
                 topic.dirty = False
@@ -253,7 +270,7 @@ class Ros2Source:
         for info in infos:
             gid = bytes(info.endpoint_gid)
             robot = topic.robot
-            if robot is None and info.node_namespace != _UNKNOWN_NAMESPACE:
+            if robot is None and info.node_namespace not in _UNKNOWN_NAMESPACES:
                 robot = self._naming.of_node(info.node_namespace)
                 if robot is None:
                     self._model.count_source_error(TRANSPORT, "invalid_namespace")
@@ -262,14 +279,21 @@ class Ros2Source:
         for gid, robot in in_graph.items():
             with self._lock:
                 publisher = topic.publishers.setdefault(gid, _Publisher(gid, None, now))
-            if publisher.robot is None and robot is not None:
+            if robot is None:
+                continue
+            if publisher.robot is None:
                 publisher.in_graph = True
                 self._adopt(topic, publisher, robot)
+            elif publisher.by_domain:  # its node is told at last
+                publisher.by_domain, publisher.in_graph = False, True
+                if robot != publisher.robot:
+                    self._move(topic, publisher, robot)
         for gid, publisher in list(topic.publishers.items()):
-            if gid in in_graph:
-                continue
             if publisher.robot is None and now - publisher.seen_at >= ATTRIBUTION_GRACE_SECONDS:
-                self._adopt(topic, publisher, self._naming.unnamespaced_robot)  # heard, never in the graph
+                publisher.by_domain = True  # heard, or in the graph, with no node told as yet
+                self._adopt(topic, publisher, self._naming.unnamespaced_robot)
+            elif gid in in_graph:
+                continue
             elif publisher.in_graph:
                 with self._lock:
                     del topic.publishers[gid]
@@ -296,7 +320,7 @@ class Ros2Source:
         if topic.kind == AGGREGATED and self._config.prefer_aggregated and robot not in self._aggregated:
             self._aggregated.add(robot)
             self._ignore_raw(robot)
-        feed = f"{topic.name}@{publisher.gid.hex()}"
+        feed = _feed_name(topic, publisher)
         ingest = PayloadIngest(self._model, robot, TRANSPORT, topic.name, cdr.WIRE_FORMAT, feed)
         while True:  # what arrived meanwhile, in order, before new messages go straight to the ingest
             with self._lock:
@@ -307,6 +331,23 @@ class Ros2Source:
             for payload in pending:
                 _ingest(ingest, payload, topic.name)
         log.info("following robot %s over ROS 2 (%s, publisher %s)", robot, topic.name, publisher.gid.hex())
+
+    def _move(self, topic: _Topic, publisher: _Publisher, robot: str) -> None:
+        """Follow a publisher taken for its domain's robot as a feed of `robot`, its node's."""
+        old = publisher.robot
+        assert old is not None
+        with self._lock:  # what arrives from now on waits in `pending` for the new ingest
+            followed, publisher.ingest, publisher.ignored = publisher.ingest is not None, None, False
+        publishers = self._robot_publishers.get(old, set())
+        publishers.discard((topic.name, publisher.gid))
+        if not publishers:
+            self._robot_publishers.pop(old, None)
+        if followed:
+            self._moved.moved(old, _feed_name(topic, publisher))
+        log.info(
+            "publisher %s of %s: a node of robot %s, not %s", publisher.gid.hex(), topic.name, robot, old
+        )
+        self._adopt(topic, publisher, robot)
 
     def _ignore_raw(self, robot: str) -> None:
         """Leave a robot's raw diagnostics publishers once it has an aggregator: forget what they said."""
@@ -367,6 +408,11 @@ class Ros2Source:
                         publisher.pending[-1] = payload  # the newest says the most
                 return
         _ingest(ingest, payload, topic.name)
+
+
+def _feed_name(topic: _Topic, publisher: _Publisher) -> str:
+    """The feed a publisher's messages are of in the model: one per publisher of a topic."""
+    return f"{topic.name}@{publisher.gid.hex()}"
 
 
 def _ingest(ingest: PayloadIngest, payload: bytes, topic: str) -> None:
