@@ -41,6 +41,7 @@ def main() -> None:
     parser.add_argument("--hardware-id", default="hw0")
     parser.add_argument("--task", action="append", default=[], help="LEVEL:NAME:MESSAGE")
     parser.add_argument("--late-task", action="append", default=[], help="SECONDS:LEVEL:NAME:MESSAGE")
+    parser.add_argument("--token-delay", type=float, default=0.0, help="seconds before the publisher's token")
     args = parser.parse_args()
 
     config = zenoh.Config()
@@ -55,10 +56,9 @@ def main() -> None:
     token = publisher_token(
         args.domain, zid, 10, namespace, args.node, "diagnostics", DIAGNOSTIC_ARRAY_HASH, topic_namespace=""
     )
-    tokens = [
-        session.liveliness().declare_token(node_token(args.domain, zid, namespace, args.node)),
-        session.liveliness().declare_token(token),
-    ]
+    tokens = [session.liveliness().declare_token(node_token(args.domain, zid, namespace, args.node))]
+    if args.token_delay <= 0:
+        tokens.append(session.liveliness().declare_token(token))
     publisher = session.declare_publisher(data_key(args.domain, "", "diagnostics"))
     gid = publisher_gid(token)
     sequence = [0]
@@ -86,6 +86,8 @@ def main() -> None:
     started = next_update = time.monotonic()
     updates = 0
     while not stop.wait(0.02):
+        if len(tokens) == 1 and time.monotonic() - started >= args.token_delay:
+            tokens.append(session.liveliness().declare_token(token))  # a router slow to pass it on, say
         while late and time.monotonic() - started >= late[0][0]:
             add(late.pop(0)[1])
         if time.monotonic() >= next_update:

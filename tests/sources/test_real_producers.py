@@ -338,3 +338,39 @@ def test_zenoh_nodes_on_the_absolute_topic_are_robots_of_their_namespaces_with_o
     # The three nodes publish on the one key of /diagnostics, each numbering its own samples: none lost.
     assert messages[(("result", "received"), ("transport", "zenoh"))] >= 20
     assert messages[(("result", "lost"), ("transport", "zenoh"))] == 0
+
+
+# A router slow to pass the token on: the exporter hears the publisher's samples, not whose they are.
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_zenoh_publisher_whose_token_comes_late_moves_to_its_robot_and_the_domains_robot_goes(
+    tmp_path: Path, workers: int
+) -> None:
+    flag = f"--ingest.workers={workers}"
+    expected = {"drive: Motor": (1, "hw0")}
+    with (
+        running_router(tmp_path) as port,
+        running_exporter(tmp_path, None, *exporter_args(port, flag), loopback_flag=False) as exporter,
+        zenoh_updater(
+            tmp_path, port, "--namespace=robot_z", "--node=drive", "--task=1:Motor:warm", "--token-delay=8"
+        ),
+    ):
+        wait_for(lambda: components(exporter, "domain0") == expected, 30, message="the domain's robot first")
+        wait_for(
+            lambda: (
+                components(exporter, "robot_z") == expected
+                and {robot["robot"] for robot in exporter.get_json("/api/v1/robots")["robots"]} == {"robot_z"}
+            ),
+            30,
+            message="its node's robot alone",
+        )
+        wait_for(
+            lambda: "reattributed" in [e["kind"] for e in events(exporter, "domain0")],
+            10,
+            message="the event",
+        )
+        forgotten = exporter.samples()["overseer_robots_forgotten_total"]
+        domain_kinds = [e["kind"] for e in events(exporter, "domain0")]
+        robot_kinds = [e["kind"] for e in events(exporter, "robot_z")]
+    assert forgotten[(("reason", "reattributed"),)] == 1
+    assert domain_kinds[-1] == "reattributed" and "robot_down" not in domain_kinds
+    assert "robot_down" not in robot_kinds and "robot_up" in robot_kinds

@@ -22,6 +22,7 @@ from overseer.config.zenoh import ZenohConfig
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
+from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh.keys import (
@@ -96,6 +97,8 @@ class ZenohIngest:
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
         self._gaps = SequenceGaps()  # by publisher GID: what each sent and this exporter never heard
         self._unattributed: dict[bytes, _Unattributed] = {}
+        self._by_domain: dict[bytes, DiagnosticsKey] = {}  # GID → its key, taken for the domain's robot
+        self._moved = MovedFeeds(model)
         self._pruned = time.monotonic()
 
     def count_source_error(self, reason: str) -> None:
@@ -237,6 +240,7 @@ class ZenohIngest:
 
     def tick(self) -> None:
         """The upkeep done every fraction of a second: late attributions, and now and then a prune."""
+        self._moved.forget(self._follows)
         self._attribute_late()
         if time.monotonic() - self._pruned >= PRUNE_INTERVAL_SECONDS:
             self._pruned = time.monotonic()
@@ -247,11 +251,34 @@ class ZenohIngest:
         now = time.monotonic()
         with self._lock:
             waiting = self._unattributed.items()
-            late = [gid for gid, held in waiting if now - held.seen_at >= ATTRIBUTION_GRACE_SECONDS]
-        for gid in late:
+            late = [
+                (gid, held.parsed) for gid, held in waiting if now - held.seen_at >= ATTRIBUTION_GRACE_SECONDS
+            ]
+        domain_robot = self._naming.unnamespaced_robot
+        for gid, parsed in late:
             with self._lock:
-                self._publishers.setdefault(gid, self._naming.unnamespaced_robot)
-            self._release(gid, self._naming.unnamespaced_robot)
+                if gid not in self._publishers:  # its token did not come meanwhile
+                    self._publishers[gid] = domain_robot
+                    self._by_domain[gid] = parsed
+            self._release(gid, domain_robot)
+
+    def _follows(self, robot: str) -> bool:
+        """Whether this ingest hears `robot` through some feed or token."""
+        return robot in self._feeds_of or robot in self._tokens
+
+    def _move(self, old: str, parsed: DiagnosticsKey, gid: bytes, robot: str) -> None:
+        """A publisher taken for the domain's robot is `robot`'s: the domain's robot leaves its feed."""
+        feed = (old, parsed.kind, gid)
+        with self._lock:
+            ingest = self._ingests.pop(feed, None)
+            feeds = self._feeds_of.get(old, [])
+            if feed in feeds:
+                feeds.remove(feed)
+                if not feeds:
+                    del self._feeds_of[old]
+        if ingest is not None:
+            self._moved.moved(old, f"{parsed.topic}@{gid.hex()}")
+        log.info("Zenoh publisher %s of %s: a node of robot %s, not %s", gid.hex(), parsed.topic, robot, old)
 
     def _ingest_for(self, robot: str, parsed: DiagnosticsKey, gid: bytes) -> PayloadIngest | None:
         """The ingest of a publisher's feed; None when it is not followed (raw beside aggregated, cap)."""
@@ -301,7 +328,11 @@ class ZenohIngest:
             return
         if gid and alive:
             with self._lock:
+                old = self._publishers.get(gid)
                 self._publishers[gid] = robot
+                by_domain = self._by_domain.pop(gid, None)
+            if by_domain is not None and old is not None and old != robot:
+                self._move(old, by_domain, gid, robot)
             self._release(gid, robot)
         if not self._shard.owns(robot):
             return
@@ -335,3 +366,5 @@ class ZenohIngest:
             owns = self._shard.owns
             for gid in [gid for gid, robot in self._publishers.items() if robot not in known and owns(robot)]:
                 del self._publishers[gid]
+            for gid in [gid for gid in self._by_domain if gid not in self._publishers]:
+                del self._by_domain[gid]
