@@ -376,21 +376,23 @@ class FleetModel:
     def forget_feed(self, robot: str, feed: str, last: bool) -> None:
         """Drop what one feed told of `robot`: its publisher turned out to be another robot's node.
 
-        When it was the robot's `last` feed, the robot was only ever that publisher's: it is forgotten, or
-        if listed, down since now.
+        A robot left with no feed and not listed was only ever that publisher: it is forgotten. Otherwise,
+        when the source hears it through no other publisher (`last`), it is down from now on.
         """
         now, wall = self._clock(), self._wall_clock()
         with self._lock:
             state = self._robots.get(robot)
             if state is None:
                 return
-            if last and state.listing is None:
-                del self._robots[robot]
-                self._forget(robot, "reattributed", wall)
-                return
             kept = {k: c for k, c in state.components.items() if c.feed != feed}
             state = _replace_components(state, kept, now)
-            self._robots[robot] = state._replace(left_at=now) if last and state.publisher_alive else state
+            if not state.feeds and state.listing is None:
+                del self._robots[robot]
+                self._forget(robot, "reattributed", wall)
+            elif last and state.publisher_alive:
+                self._robots[robot] = state._replace(left_at=now)
+            else:
+                self._robots[robot] = state
 
     def expire(self) -> list[str]:
         """Forget robots and components silent for `expire_after`; returns the robots forgotten.

@@ -1,32 +1,48 @@
-"""Feeds moved to another robot, forgotten by the robot that first had them one discovery round later.
+"""Feeds moved to another robot, forgotten by the robot that first had them a second later.
 
 A publisher of the absolute `/diagnostics` whose node the ROS graph has not told within a grace is taken
 for its domain's robot; when the graph names its node later (Fast DDS sends a late reader a node's graph
 at its next heartbeat, 3 s on), the source moves it to its node's robot. A message taken just before the
-move may still be on its way to the old robot, so the old robot forgets the feed a round later, not at once.
+move may still be on its way to the old robot, so the old robot forgets the feed a second later, not at
+once.
 """
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Callable
 
 from overseer.model import FleetModel
 
+FORGET_AFTER_SECONDS = 1.0  # a message taken before the move has long been applied by then
+# How long a publisher taken for its domain's robot is watched for its node where that costs a lookup
+# (--ros2's graph, Zenoh's tokens): a graph or token later than that is not waited for.
+REATTRIBUTION_WINDOW_SECONDS = 60.0
+
 
 class MovedFeeds:
-    """Feeds that left a robot for another, waiting for the next discovery round to be forgotten."""
+    """Feeds that left a robot for another, waiting to be forgotten by the robot they left."""
 
-    def __init__(self, model: FleetModel) -> None:
-        """Forget the moved feeds in `model`."""
+    def __init__(self, model: FleetModel, clock: Callable[[], float] = time.monotonic) -> None:
+        """Forget the moved feeds in `model`, timed by `clock`."""
         self._model = model
-        self._moved: list[tuple[str, str]] = []
+        self._clock = clock
+        self._lock = threading.Lock()  # a source may move feeds in one thread and forget in another
+        self._moved: list[tuple[float, str, str]] = []  # (when, robot, feed)
 
     def moved(self, robot: str, feed: str) -> None:
-        """`feed` no longer belongs to `robot`: forget it at the next `forget`."""
-        self._moved.append((robot, feed))
+        """`feed` no longer belongs to `robot`: forget it at a `forget` a second from now."""
+        with self._lock:
+            self._moved.append((self._clock(), robot, feed))
 
     def forget(self, followed: Callable[[str], bool]) -> None:
-        """Forget the feeds moved before now; a robot `followed` through no other goes with its last."""
-        moved, self._moved = self._moved, []
-        for robot, feed in moved:
+        """Forget the feeds moved a second ago or more; `followed` tells a robot the source still hears."""
+        if not self._moved:
+            return
+        horizon = self._clock() - FORGET_AFTER_SECONDS
+        with self._lock:
+            due = [moved for moved in self._moved if moved[0] <= horizon]
+            self._moved = [moved for moved in self._moved if moved[0] > horizon]
+        for _, robot, feed in due:
             self._model.forget_feed(robot, feed, last=not followed(robot))

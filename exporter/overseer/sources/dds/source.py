@@ -239,27 +239,30 @@ class DdsSource:
         for writer in list(session.writers.values()):
             if (writer.robot is not None and not writer.by_domain) or not writer.guid:
                 continue
-            node = None if session.graph is None else session.graph.node_of(writer.guid)
-            if node is not None:
-                robot = session.naming.of_node(node.namespace)
-                if robot is None:
-                    self._model.count_source_error(TRANSPORT, "invalid_namespace")
-                    log.warning("node %r has an invalid namespace %r", node.name, node.namespace)
-                    robot = session.naming.unnamespaced_robot
-                if writer.robot is not None:
+            robot = self._robot_of_node(session, writer.guid)
+            if writer.robot is not None:  # the domain's robot's: moved once its node is told
+                if robot is not None:
                     writer.by_domain = False
                     if robot != writer.robot:
                         self._move(writer, robot)
-                    continue
-            elif writer.robot is not None:
-                continue
+            elif robot is not None:
+                self._adopt(writer, robot)
             elif now - writer.seen_at >= ATTRIBUTION_GRACE_SECONDS:
-                robot = session.naming.unnamespaced_robot
                 writer.by_domain = True
-                log.info("a writer of %s is no ROS 2 node's as yet: robot %s", writer.topic, robot)
-            else:
-                continue
-            self._adopt(writer, robot)
+                log.info("a writer of %s is no ROS 2 node's as yet: the domain's robot", writer.topic)
+                self._adopt(writer, session.naming.unnamespaced_robot)
+
+    def _robot_of_node(self, session: _DomainSession, guid: bytes) -> str | None:
+        """The robot of the node that owns writer `guid`, when the graph has told it."""
+        node = None if session.graph is None else session.graph.node_of(guid)
+        if node is None:
+            return None
+        robot = session.naming.of_node(node.namespace)
+        if robot is None:
+            self._model.count_source_error(TRANSPORT, "invalid_namespace")
+            log.warning("node %r has an invalid namespace %r", node.name, node.namespace)
+            return session.naming.unnamespaced_robot
+        return robot
 
     def _move(self, writer: _Writer, robot: str) -> None:
         """Follow a writer taken for its domain's robot as a feed of `robot`, its node's."""

@@ -36,7 +36,7 @@ from overseer.config.ros2 import Ros2Config
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.reattribution import MovedFeeds
+from overseer.sources.reattribution import REATTRIBUTION_WINDOW_SECONDS, MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.ros2 import node as ros_node
 from overseer.sources.ros2.rcl_take import RawTaker, wake_on_new_message
@@ -50,9 +50,6 @@ DISCOVERY_PERIOD_SECONDS = 0.5
 # A publisher whose node the graph does not tell by then is the domain's robot's: a little more than Fast
 # DDS's heartbeat period (3 s), at which a reader that matched after a node's graph was written hears it.
 ATTRIBUTION_GRACE_SECONDS = 4.0
-# How long a publisher taken for the domain's robot is looked for in the graph, each discovery, until its
-# node is told (a DDS application that is no ROS 2 node never is).
-REATTRIBUTION_WINDOW_SECONDS = 60.0
 MAX_PENDING_MESSAGES = 16  # per publisher, while its robot is not known yet
 QUEUE_DEPTH = 10  # a topic's messages between two takes: every node of a robot may publish /diagnostics
 # What rclpy says of a publisher's node before its participant's graph has told it: unknown when the graph
@@ -133,7 +130,7 @@ class Ros2Source:
         self._stopping = -1
         self._woken: dict[int, _Topic] = {}  # wake-up eventfd → its topic, changed under `_taking`
         self._taker: threading.Thread | None = None
-        self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) in the graph
+        self._robot_publishers: dict[str, set[tuple[str, bytes]]] = {}  # robot → (topic, gid) it is heard on
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
         self._moved = MovedFeeds(model)
 
@@ -290,7 +287,8 @@ class Ros2Source:
                     self._move(topic, publisher, robot)
         for gid, publisher in list(topic.publishers.items()):
             if publisher.robot is None and now - publisher.seen_at >= ATTRIBUTION_GRACE_SECONDS:
-                publisher.by_domain = True  # heard, or in the graph, with no node told as yet
+                # Heard, or in the graph with no node told as yet; in the graph, it tells when it leaves.
+                publisher.by_domain, publisher.in_graph = True, gid in in_graph
                 self._adopt(topic, publisher, self._naming.unnamespaced_robot)
             elif gid in in_graph:
                 continue
