@@ -1,4 +1,4 @@
-"""Freed heap memory handed back to the system every minute: glibc keeps it after a backlog drains.
+"""Freed heap memory handed back to the system: glibc keeps it after a backlog drains, or a large render.
 
 When the ingest falls behind (a fleet heard for the first time, 10,000 robots' first arrays at once),
 the samples waiting for it pile up, tens of thousands of them, a few kB each (`sources/paced_drain.py`,
@@ -15,6 +15,9 @@ glibc also gives each new thread a heap (an arena) of its own, up to eight a cor
 process runs many (Zenoh's, the relay's, the HTTP server's): each keeps what it freed. Two arenas took
 the exporter's process from 133-136 MB to 111-112 MB at 3,000 robots with two workers, for the same CPU
 (`limit_heap_arenas`); `MALLOC_ARENA_MAX` or glibc's tunables, when an operator sets them, decide instead.
+
+A scrape of 10,000 robots renders megabytes at a time; glibc's moving bound for mapping a block on its
+own soon takes such blocks from the heap instead, where they stay once freed (`map_large_blocks`).
 """
 
 from __future__ import annotations
@@ -30,7 +33,9 @@ log = logging.getLogger(__name__)
 
 TRIM_INTERVAL_SECONDS = 60.0
 HEAP_ARENAS = 2
-_M_ARENA_MAX = -8  # mallopt's parameter (malloc.h)
+MMAP_THRESHOLD_BYTES = 1 << 20
+_M_MMAP_THRESHOLD = -3  # mallopt's parameters (malloc.h)
+_M_ARENA_MAX = -8
 
 
 def _c_function(name: str, *argtypes: type[ctypes._SimpleCData[Any]]) -> Callable[..., int] | None:
@@ -61,6 +66,29 @@ def trim_heap() -> bool:
         return False
     _TRIM(0)  # ctypes lets go of the interpreter lock meanwhile
     return True
+
+
+def shape_heap() -> None:
+    """Shape this process's heap before its threads start: few arenas, large blocks mapped on their own."""
+    limit_heap_arenas()
+    map_large_blocks()
+
+
+def map_large_blocks(threshold: int = MMAP_THRESHOLD_BYTES) -> bool:
+    """Map each block of `threshold` bytes or more on its own, freed to the system; False where left as is.
+
+    glibc maps a block of 128 kB or more on its own, but raises that bound to the size of each such block
+    freed, up to 32 MB: after the first scrape, the megabytes of a render's pieces come from the heap, and
+    stay the process's between live objects once freed. A fixed bound keeps them mapped. Left as it is
+    where the C library has no `mallopt`, or where the environment already says (`MALLOC_MMAP_THRESHOLD_`,
+    or `mmap_threshold` in `GLIBC_TUNABLES`).
+    """
+    if _MALLOPT is None:
+        return False
+    tunables = os.environ.get("GLIBC_TUNABLES", "")
+    if "MALLOC_MMAP_THRESHOLD_" in os.environ or "glibc.malloc.mmap_threshold" in tunables:
+        return False
+    return _MALLOPT(_M_MMAP_THRESHOLD, threshold) == 1
 
 
 def limit_heap_arenas(arenas: int = HEAP_ARENAS) -> bool:

@@ -24,7 +24,7 @@ def thresholds(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     The commands' heap policy (two arenas, a trimming thread) is left out: it would stay with this process.
     """
     for module in ("overseer.commands.run", "overseer.commands.demo", "overseer.fleet.workers.process"):
-        monkeypatch.setattr(f"{module}.limit_heap_arenas", lambda: False)
+        monkeypatch.setattr(f"{module}.shape_heap", lambda: None)
         monkeypatch.setattr(f"{module}.trim_heap_every", lambda: None)
     before = gc.get_threshold()
     gc.set_threshold(700, 10, 10)

@@ -144,9 +144,7 @@ def started(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     """Which commands limited their arenas and started the trimming thread (neither done here)."""
     calls: list[str] = []
     for module in ("overseer.commands.run", "overseer.commands.demo", "overseer.fleet.workers.process"):
-        monkeypatch.setattr(
-            f"{module}.limit_heap_arenas", lambda module=module: calls.append(f"{module}: arenas")
-        )
+        monkeypatch.setattr(f"{module}.shape_heap", lambda module=module: calls.append(f"{module}: arenas"))
         monkeypatch.setattr(f"{module}.trim_heap_every", lambda module=module: calls.append(module))
     return calls
 
@@ -173,3 +171,55 @@ def test_an_ingest_worker_trims_its_heap_with_serving_and_exit_stubbed(
     monkeypatch.setattr(logging, "shutdown", lambda: None)  # pytest's own handlers stay open
     worker_process.run_worker(Config(), 0, 2, None, None)  # type: ignore[arg-type]
     assert started == ["overseer.fleet.workers.process: arenas", "overseer.fleet.workers.process"]
+
+
+# A block of megabytes freed between live ones, as a render's pieces are: still resident, or given back.
+_LARGE_BLOCK_FREED = """
+import ctypes, sys
+from overseer.heap_trim import map_large_blocks
+
+mapped = map_large_blocks() if sys.argv[1] == "map" else None
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+
+def resident() -> int:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096
+
+size = 8 << 20
+libc.free(libc.malloc(size))  # glibc mapped it, and from now on takes blocks this large from the heap
+block = libc.malloc(size)
+ctypes.memset(block, 1, size)
+above = [libc.malloc(100_000) for _ in range(4)]  # live blocks after it: the heap cannot shrink past them
+before = resident()
+libc.free(block)
+print(mapped, before - resident())
+"""
+
+
+def resident_bytes_given_back(map_blocks: bool, **environment: str) -> tuple[str, int]:
+    """What `map_large_blocks` said, and the resident bytes freeing an 8 MB block between others gave back."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_MMAP_THRESHOLD_", "GLIBC_TUNABLES")}
+    env["PYTHONPATH"] = str(Path(heap_trim.__file__).parents[1])
+    result = subprocess.run(
+        [sys.executable, "-c", _LARGE_BLOCK_FREED, "map" if map_blocks else "leave"],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**env, **environment},
+    )
+    said, given_back = result.stdout.split()
+    return said, int(given_back)
+
+
+def test_a_large_block_freed_between_live_ones_is_given_back_once_large_blocks_are_mapped() -> None:
+    said, given_back = resident_bytes_given_back(map_blocks=False)
+    assert said == "None" and given_back < 1 << 20, "glibc gave it back anyway: nothing to show"
+    said, given_back = resident_bytes_given_back(map_blocks=True)
+    assert said == "True" and given_back >= 8 << 20
+
+
+def test_large_blocks_are_left_as_the_environment_says() -> None:
+    said, given_back = resident_bytes_given_back(map_blocks=True, MALLOC_MMAP_THRESHOLD_=str(64 << 20))
+    assert said == "False" and given_back < 1 << 20

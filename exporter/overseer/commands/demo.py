@@ -12,7 +12,7 @@ from overseer.commands.signals import wait_for_signal
 from overseer.config import load_config
 from overseer.config.web import DEFAULT_PORT
 from overseer.garbage_collection import collect_in_large_batches
-from overseer.heap_trim import limit_heap_arenas, trim_heap_every
+from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the demo until SIGTERM or SIGINT."""
     collect_in_large_batches()
-    limit_heap_arenas()
+    shape_heap()
     trim_heap_every()
     config = load_config(
         None,

@@ -12,7 +12,7 @@ from overseer.config import ConfigError, load_config
 from overseer.config.loading import ALL_OPTIONS
 from overseer.config.options import add_flags, naming_the_flag, overrides
 from overseer.garbage_collection import collect_in_large_batches
-from overseer.heap_trim import limit_heap_arenas, trim_heap_every
+from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
 
 log = logging.getLogger("overseer")
@@ -27,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve the fleet until SIGTERM or SIGINT; 1 when it cannot start or stop cleanly."""
     collect_in_large_batches()
-    limit_heap_arenas()
+    shape_heap()
     trim_heap_every()
     try:
         config = load_config(args.config_file, overrides(args, ALL_OPTIONS))

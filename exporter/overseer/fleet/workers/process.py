@@ -22,7 +22,7 @@ from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.workers.merge import portable_robots
 from overseer.garbage_collection import collect_in_large_batches
-from overseer.heap_trim import limit_heap_arenas, trim_heap_every
+from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
 from overseer.model.events import Event, event_rows
 from overseer.model.robot_cap import SharedRobotCap
@@ -90,7 +90,7 @@ def run_worker(
     worker left behind by a dead exporter would hold its robots' readers for good.
     """
     collect_in_large_batches()
-    limit_heap_arenas()
+    shape_heap()
     trim_heap_every()
     status = 1
     try:
