@@ -36,6 +36,7 @@ HEAP_ARENAS = 2
 MMAP_THRESHOLD_BYTES = 1 << 20
 _M_MMAP_THRESHOLD = -3  # mallopt's parameters (malloc.h)
 _M_ARENA_MAX = -8
+_FIXING = ("mmap_threshold", "trim_threshold", "top_pad", "mmap_max")  # glibc settings that fix the bounds
 
 
 def _c_function(name: str, *argtypes: type[ctypes._SimpleCData[Any]]) -> Callable[..., int] | None:
@@ -79,14 +80,15 @@ def map_large_blocks(threshold: int = MMAP_THRESHOLD_BYTES) -> bool:
 
     glibc maps a block of 128 kB or more on its own, but raises that bound to the size of each such block
     freed, up to 32 MB: after the first scrape, the megabytes of a render's pieces come from the heap, and
-    stay the process's between live objects once freed. A fixed bound keeps them mapped. Left as it is
-    where the C library has no `mallopt`, or where the environment already says (`MALLOC_MMAP_THRESHOLD_`,
-    or `mmap_threshold` in `GLIBC_TUNABLES`).
+    stay the process's between live objects once freed. A fixed bound keeps them mapped; it also keeps
+    the bound above which `free` shrinks the heap's top at its 128 kB, where it grew with the other
+    before. Left as it is where the C library has no `mallopt`, or where the environment already fixes
+    either bound (glibc's `MALLOC_*_` variables or tunables).
     """
     if _MALLOPT is None:
         return False
     tunables = os.environ.get("GLIBC_TUNABLES", "")
-    if "MALLOC_MMAP_THRESHOLD_" in os.environ or "glibc.malloc.mmap_threshold" in tunables:
+    if any(f"MALLOC_{name.upper()}_" in os.environ or f"glibc.malloc.{name}" in tunables for name in _FIXING):
         return False
     return _MALLOPT(_M_MMAP_THRESHOLD, threshold) == 1
 

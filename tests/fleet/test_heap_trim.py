@@ -141,10 +141,10 @@ def test_an_arena_count_the_environment_sets_is_left_to_glibc() -> None:
 
 @pytest.fixture
 def started(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """Which commands limited their arenas and started the trimming thread (neither done here)."""
+    """Which commands shaped their heap and started the trimming thread (neither done here)."""
     calls: list[str] = []
     for module in ("overseer.commands.run", "overseer.commands.demo", "overseer.fleet.workers.process"):
-        monkeypatch.setattr(f"{module}.shape_heap", lambda module=module: calls.append(f"{module}: arenas"))
+        monkeypatch.setattr(f"{module}.shape_heap", lambda module=module: calls.append(f"{module}: shape"))
         monkeypatch.setattr(f"{module}.trim_heap_every", lambda module=module: calls.append(module))
     return calls
 
@@ -155,9 +155,9 @@ def test_overseer_run_and_demo_trim_their_heap(
     assert main(["run", "--config.file", str(tmp_path / "missing.yml")]) == 2
     assert main(["demo", "--web.listen-address", "no port here"]) == 2
     assert started == [
-        "overseer.commands.run: arenas",
+        "overseer.commands.run: shape",
         "overseer.commands.run",
-        "overseer.commands.demo: arenas",
+        "overseer.commands.demo: shape",
         "overseer.commands.demo",
     ]
     capsys.readouterr()
@@ -170,12 +170,12 @@ def test_an_ingest_worker_trims_its_heap_with_serving_and_exit_stubbed(
     monkeypatch.setattr(os, "_exit", lambda status: None)
     monkeypatch.setattr(logging, "shutdown", lambda: None)  # pytest's own handlers stay open
     worker_process.run_worker(Config(), 0, 2, None, None)  # type: ignore[arg-type]
-    assert started == ["overseer.fleet.workers.process: arenas", "overseer.fleet.workers.process"]
+    assert started == ["overseer.fleet.workers.process: shape", "overseer.fleet.workers.process"]
 
 
 # A block of megabytes freed between live ones, as a render's pieces are: still resident, or given back.
 _LARGE_BLOCK_FREED = """
-import ctypes, sys
+import ctypes, os, sys
 from overseer.heap_trim import map_large_blocks
 
 mapped = map_large_blocks() if sys.argv[1] == "map" else None
@@ -185,11 +185,12 @@ libc.free.argtypes = [ctypes.c_void_p]
 
 def resident() -> int:
     with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * 4096
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 size = 8 << 20
 libc.free(libc.malloc(size))  # glibc mapped it, and from now on takes blocks this large from the heap
 block = libc.malloc(size)
+assert block, "no memory"
 ctypes.memset(block, 1, size)
 above = [libc.malloc(100_000) for _ in range(4)]  # live blocks after it: the heap cannot shrink past them
 before = resident()
@@ -200,7 +201,7 @@ print(mapped, before - resident())
 
 def resident_bytes_given_back(map_blocks: bool, **environment: str) -> tuple[str, int]:
     """What `map_large_blocks` said, and the resident bytes freeing an 8 MB block between others gave back."""
-    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_MMAP_THRESHOLD_", "GLIBC_TUNABLES")}
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"}
     env["PYTHONPATH"] = str(Path(heap_trim.__file__).parents[1])
     result = subprocess.run(
         [sys.executable, "-c", _LARGE_BLOCK_FREED, "map" if map_blocks else "leave"],
@@ -220,6 +221,14 @@ def test_a_large_block_freed_between_live_ones_is_given_back_once_large_blocks_a
     assert said == "True" and given_back >= 8 << 20
 
 
-def test_large_blocks_are_left_as_the_environment_says() -> None:
-    said, given_back = resident_bytes_given_back(map_blocks=True, MALLOC_MMAP_THRESHOLD_=str(64 << 20))
+@pytest.mark.parametrize(
+    "setting",
+    [
+        {"MALLOC_MMAP_THRESHOLD_": str(16 << 20)},
+        {"GLIBC_TUNABLES": f"glibc.malloc.mmap_threshold={16 << 20}"},
+        {"MALLOC_TOP_PAD_": str(16 << 20)},
+    ],
+)
+def test_large_blocks_are_left_as_the_environment_says(setting: dict[str, str]) -> None:
+    said, given_back = resident_bytes_given_back(map_blocks=True, **setting)
     assert said == "False" and given_back < 1 << 20

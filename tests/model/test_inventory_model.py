@@ -315,6 +315,10 @@ def test_a_moved_feed_leaves_the_robots_other_feeds_and_a_listed_robot_goes_down
     _, listed = fleet.robot("listed")
     assert list(fleet.components("shared")) == ["Disk"] and snapshot.robot_up(shared)
     assert fleet.components("listed") == {} and not snapshot.robot_up(listed)
+    # A robot whose other publisher has said nothing yet is kept for it.
+    fleet.publish("quiet", "drive: Motor")
+    fleet.model.forget_feed("quiet", "writer", last=False)
+    assert fleet.components("quiet") == {}
     # The other feed's publisher has left: what it said stays, and the robot is down.
     fleet.publish("shared", "drive: Motor")
     fleet.model.forget_feed("shared", "writer", last=True)

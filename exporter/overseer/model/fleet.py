@@ -376,8 +376,8 @@ class FleetModel:
     def forget_feed(self, robot: str, feed: str, last: bool) -> None:
         """Drop what one feed told of `robot`: its publisher turned out to be another robot's node.
 
-        A robot left with no feed and not listed was only ever that publisher: it is forgotten. Otherwise,
-        when the source hears it through no other publisher (`last`), it is down from now on.
+        A robot the source hears through no other publisher (`last`), with no feed left and not listed, was
+        only ever that publisher: it is forgotten. Otherwise, when `last`, it is down from now on.
         """
         now, wall = self._clock(), self._wall_clock()
         with self._lock:
@@ -386,7 +386,7 @@ class FleetModel:
                 return
             kept = {k: c for k, c in state.components.items() if c.feed != feed}
             state = _replace_components(state, kept, now)
-            if not state.feeds and state.listing is None:
+            if last and not state.feeds and state.listing is None:
                 del self._robots[robot]
                 self._forget(robot, "reattributed", wall)
             elif last and state.publisher_alive:

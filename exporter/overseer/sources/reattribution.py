@@ -16,9 +16,6 @@ from collections.abc import Callable
 from overseer.model import FleetModel
 
 FORGET_AFTER_SECONDS = 1.0  # a message taken before the move has long been applied by then
-# How long a publisher taken for its domain's robot is watched for its node where that costs a lookup
-# (--ros2's graph, Zenoh's tokens): a graph or token later than that is not waited for.
-REATTRIBUTION_WINDOW_SECONDS = 60.0
 
 
 class MovedFeeds:

@@ -51,6 +51,7 @@ def no_waiting(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def ingest_of(model: FleetModel, shard: Shard | None = None) -> ZenohIngest:
+    """A Zenoh ingest of `shard` (the whole fleet by default) feeding `model`, with no session."""
     config = ZenohConfig(enabled=True)
     naming = RobotNaming(config.unnamespaced_robot, False, DEFAULT_NAMESPACE_DEPTH)
     return ZenohIngest(config, model, shard or Shard(), naming)

@@ -36,7 +36,7 @@ from overseer.config.ros2 import Ros2Config
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.reattribution import REATTRIBUTION_WINDOW_SECONDS, MovedFeeds
+from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.ros2 import node as ros_node
 from overseer.sources.ros2.rcl_take import RawTaker, wake_on_new_message
@@ -50,6 +50,9 @@ DISCOVERY_PERIOD_SECONDS = 0.5
 # A publisher whose node the graph does not tell by then is the domain's robot's: a little more than Fast
 # DDS's heartbeat period (3 s), at which a reader that matched after a node's graph was written hears it.
 ATTRIBUTION_GRACE_SECONDS = 4.0
+# How long a publisher taken for the domain's robot is looked up in the graph at every discovery (each a
+# lookup of its topic's publishers); later, only when the topic's publishers change.
+REATTRIBUTION_WINDOW_SECONDS = 60.0
 MAX_PENDING_MESSAGES = 16  # per publisher, while its robot is not known yet
 QUEUE_DEPTH = 10  # a topic's messages between two takes: every node of a robot may publish /diagnostics
 # What rclpy says of a publisher's node before its participant's graph has told it: unknown when the graph
@@ -276,6 +279,8 @@ class Ros2Source:
         for gid, robot in in_graph.items():
             with self._lock:
                 publisher = topic.publishers.setdefault(gid, _Publisher(gid, None, now))
+            if publisher.robot is not None:
+                publisher.in_graph = True  # heard first, adopted: the graph now tells when it leaves
             if robot is None:
                 continue
             if publisher.robot is None:

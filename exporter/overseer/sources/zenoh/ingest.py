@@ -22,7 +22,7 @@ from overseer.config.zenoh import ZenohConfig
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
-from overseer.sources.reattribution import REATTRIBUTION_WINDOW_SECONDS, MovedFeeds
+from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.topic_names import AGGREGATED, RAW
 from overseer.sources.zenoh.keys import (
@@ -97,8 +97,8 @@ class ZenohIngest:
         self._publishers: dict[bytes, str] = {}  # GID → robot, from the publishers' tokens
         self._gaps = SequenceGaps()  # by publisher GID: what each sent and this exporter never heard
         self._unattributed: dict[bytes, _Unattributed] = {}
-        # GID → its key and when, of a publisher taken for the domain's robot (this ingest's) with no token
-        self._by_domain: dict[bytes, tuple[DiagnosticsKey, float]] = {}
+        # GID → its key, of a publisher taken for the domain's robot (this ingest's) before any token
+        self._by_domain: dict[bytes, DiagnosticsKey] = {}
         self._moved = MovedFeeds(model)
         self._pruned = time.monotonic()
 
@@ -262,7 +262,7 @@ class ZenohIngest:
                 if robot is None:  # its token did not come meanwhile
                     robot = self._publishers[gid] = domain_robot
                     if self._shard.owns(domain_robot):
-                        self._by_domain[gid] = (parsed, now)
+                        self._by_domain[gid] = parsed
             self._release(gid, robot)
 
     def _follows(self, robot: str) -> bool:
@@ -337,7 +337,7 @@ class ZenohIngest:
                 self._publishers[gid] = robot
                 by_domain = self._by_domain.pop(gid, None)
             if by_domain is not None and old is not None and old != robot:
-                self._move(old, by_domain[0], gid, robot)
+                self._move(old, by_domain, gid, robot)
             self._release(gid, robot)
         if not self._shard.owns(robot):
             return
@@ -371,6 +371,5 @@ class ZenohIngest:
             owns = self._shard.owns
             for gid in [gid for gid, robot in self._publishers.items() if robot not in known and owns(robot)]:
                 del self._publishers[gid]
-            horizon = time.monotonic() - REATTRIBUTION_WINDOW_SECONDS
-            for gid in [gid for gid, (_, at) in self._by_domain.items() if at < horizon]:
+            for gid in [gid for gid in self._by_domain if gid not in self._publishers]:
                 del self._by_domain[gid]
