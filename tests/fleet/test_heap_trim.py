@@ -114,17 +114,22 @@ print(limited)
 """
 
 
-def arenas_of_eight_threads(limit: bool, **environment: str) -> tuple[str, int]:
-    """What `limit_heap_arenas` said, and how many arenas eight threads allocating at once used."""
-    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
+def run_script(script: str, argument: str, **environment: str) -> subprocess.CompletedProcess[str]:
+    """Run `script` with `argument` in a fresh interpreter, no glibc malloc settings but `environment`."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"}
     env["PYTHONPATH"] = str(Path(heap_trim.__file__).parents[1])
-    result = subprocess.run(
-        [sys.executable, "-c", _THREADS_ALLOCATING, "limit" if limit else "leave"],
+    return subprocess.run(
+        [sys.executable, "-c", script, argument],
         capture_output=True,
         text=True,
         check=True,
         env={**env, **environment},
     )
+
+
+def arenas_of_eight_threads(limit: bool, **environment: str) -> tuple[str, int]:
+    """What `limit_heap_arenas` said, and how many arenas eight threads allocating at once used."""
+    result = run_script(_THREADS_ALLOCATING, "limit" if limit else "leave", **environment)
     return result.stdout.strip(), result.stderr.count("Arena ")
 
 
@@ -201,16 +206,9 @@ print(mapped, before - resident())
 
 def resident_bytes_given_back(map_blocks: bool, **environment: str) -> tuple[str, int]:
     """What `map_large_blocks` said, and the resident bytes freeing an 8 MB block between others gave back."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"}
-    env["PYTHONPATH"] = str(Path(heap_trim.__file__).parents[1])
-    result = subprocess.run(
-        [sys.executable, "-c", _LARGE_BLOCK_FREED, "map" if map_blocks else "leave"],
-        capture_output=True,
-        text=True,
-        check=True,
-        env={**env, **environment},
-    )
-    said, given_back = result.stdout.split()
+    said, given_back = run_script(
+        _LARGE_BLOCK_FREED, "map" if map_blocks else "leave", **environment
+    ).stdout.split()
     return said, int(given_back)
 
 
