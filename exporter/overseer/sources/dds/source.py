@@ -270,11 +270,7 @@ class DdsSource:
         assert old is not None
         with self._lock:  # what arrives from now on waits in `pending` for the new ingest
             followed, writer.ingest, writer.ignored = writer.ingest is not None, None, False
-        writers = [other for other in self._robot_writers.get(old, []) if other is not writer]
-        if writers:
-            self._robot_writers[old] = writers
-        else:
-            self._robot_writers.pop(old, None)
+        self._drop_writer(old, writer)
         if followed:
             self._moved.moved(old, _feed_name(writer))
         log.info("writer %s of %s: a node of robot %s, not %s", writer.guid.hex(), writer.topic, robot, old)
@@ -324,14 +320,18 @@ class DdsSource:
         if writer is None or writer.robot is None:
             return
         robot = writer.robot
+        if self._drop_writer(robot, writer) and self._shard.owns(robot):
+            self._model.publisher_left(robot)
+            log.info("robot %s: its last diagnostics writer left", robot)
+
+    def _drop_writer(self, robot: str, writer: _Writer) -> bool:
+        """`writer` is no longer one of `robot`'s; True when it was its last."""
         writers = [other for other in self._robot_writers.get(robot, []) if other is not writer]
         if writers:
             self._robot_writers[robot] = writers
-        else:
-            self._robot_writers.pop(robot, None)
-            if self._shard.owns(robot):
-                self._model.publisher_left(robot)
-                log.info("robot %s: its last diagnostics writer left", robot)
+            return False
+        self._robot_writers.pop(robot, None)
+        return True
 
     def _read_best_effort(self, session: _DomainSession, topic_name: str) -> None:
         """From now on read `topic_name` best-effort: a reliable reader never hears its new writer."""

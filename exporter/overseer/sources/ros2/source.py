@@ -341,10 +341,7 @@ class Ros2Source:
         assert old is not None
         with self._lock:  # what arrives from now on waits in `pending` for the new ingest
             followed, publisher.ingest, publisher.ignored = publisher.ingest is not None, None, False
-        publishers = self._robot_publishers.get(old, set())
-        publishers.discard((topic.name, publisher.gid))
-        if not publishers:
-            self._robot_publishers.pop(old, None)
+        self._drop_publisher(old, topic, publisher)
         if followed:
             self._moved.moved(old, _feed_name(topic, publisher))
         log.info(
@@ -365,13 +362,18 @@ class Ros2Source:
     def _publisher_left(self, topic: _Topic, publisher: _Publisher) -> None:
         robot = publisher.robot
         assert robot is not None
+        if self._drop_publisher(robot, topic, publisher) and self._shard.owns(robot):
+            self._model.publisher_left(robot)
+            log.info("robot %s: its last diagnostics publisher left the graph", robot)
+
+    def _drop_publisher(self, robot: str, topic: _Topic, publisher: _Publisher) -> bool:
+        """`publisher` of `topic` is no longer one of `robot`'s; True when it was its last."""
         publishers = self._robot_publishers.get(robot, set())
         publishers.discard((topic.name, publisher.gid))
-        if not publishers:
-            self._robot_publishers.pop(robot, None)
-            if self._shard.owns(robot):
-                self._model.publisher_left(robot)
-                log.info("robot %s: its last diagnostics publisher left the graph", robot)
+        if publishers:
+            return False
+        self._robot_publishers.pop(robot, None)
+        return True
 
     def _take_loop(self, poll: select.epoll, stopping: int) -> None:
         taker = RawTaker()
