@@ -55,8 +55,8 @@ def test_a_components_stamps_are_the_hashes_of_its_fields(name: str, monkeypatch
         Component(("/a", ""), Level.WARN, "warm", "hw1", (("v", "1.5"),), 1.0, 3, "f"),
         Component(("/b", "x"), Level.OK, "ok", "", (), 2.0, 0, "f"),
     ]
-    items = [(record.key, record) for record in records]
-    assert exposition._stamps(items, frozenset({("/b", "x")})).tolist() == [
+    components = {record.key: record for record in records}
+    assert exposition._stamps(components, frozenset({("/b", "x")})).tolist() == [
         hash((("/a", ""), Level.WARN, "warm", "hw1", 3)),
         -1,  # missing from its feed's latest message: never copied
         hash(((("v", "1.5"),),)),

@@ -15,9 +15,10 @@ from __future__ import annotations
 import re
 import threading
 from array import array
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from itertools import compress
+from math import copysign
 from operator import ne
 from typing import cast
 
@@ -120,7 +121,7 @@ class FleetExposition:
             changes.append(lines.changes)
             values.append(lines.values)
             messages.append(lines.messages)
-            robot_level.append(f"ros_diagnostics_robot_level{label}{go_float(float(lines.robot_level))}\n")
+            robot_level.append(f"ros_diagnostics_robot_level{label}{_LEVEL_VALUES[lines.robot_level]}\n")
             robot_up.append(f"ros_diagnostics_robot_up{label}{'1.0' if up else '0.0'}\n")
             info.append(lines.info)
             counts.append(lines.counts)
@@ -132,7 +133,8 @@ class FleetExposition:
                 )
             period = learned_period(robot)
             if period is not None:
-                periods.append(f"ros_diagnostics_robot_period_seconds{label}{go_float(round(period, 3))}\n")
+                period_text = render.number(round(period, 3))
+                periods.append(f"ros_diagnostics_robot_period_seconds{label}{period_text}\n")
         self._robots = current
         return ExpositionPart(
             len(current),
@@ -194,7 +196,7 @@ def _lines_for(
     judged = bytes(levels)
     items = list(robot.components.items())
     lines = _ComponentLines(items, levels, f'robot="{render.escape(robot.name)}"', render)
-    stamps = _stamps(items, missing)
+    stamps = _stamps(robot.components, missing)
     to_render = (
         _lines_to_render(copyable.stamps, copyable.component_levels, stamps, judged)
         if copyable is not None
@@ -235,7 +237,7 @@ _VALUES = bytes([Component._fields.index("values")])
 _MISSING = -1  # the first stamp of a component missing from its feed's latest message: hash() is never -1
 
 
-def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[ComponentKey]) -> array[int]:
+def _stamps(components: Mapping[ComponentKey, Component], missing: frozenset[ComponentKey]) -> array[int]:
     """Two hashes a component, of what its lines are rendered from: all but its values, and its values.
 
     The first hash of each of the n components, then the second of each. A component missing from its
@@ -244,11 +246,11 @@ def _stamps(items: list[tuple[ComponentKey, Component]], missing: frozenset[Comp
     2**64 a change on a 64-bit build, and then its lines are a change late). Hashed in C where it was
     built (`stamps`): a changed robot's components are stamped at every scrape.
     """
-    records = tuple(component for _, component in items)
+    records = tuple(components.values())
     stamps: array[int] = array("q")
     stamps.frombytes(field_hashes(records, _RENDERED_FROM))
     if missing:
-        for index, (key, _) in enumerate(items):
+        for index, key in enumerate(components):
             if key in missing:
                 stamps[index] = _MISSING
     stamps.frombytes(field_hashes(records, _VALUES))
@@ -426,6 +428,7 @@ class _ComponentLines:
 
 
 _LEVEL_VALUES = {level: go_float(float(level)) for level in Level}
+_ZERO, _NEGATIVE_ZERO = go_float(0.0), go_float(-0.0)
 
 
 def _info_line(robot: RobotState, escape: Callable[[str], str]) -> str:
@@ -491,8 +494,8 @@ class _RenderCache:
         return label
 
     def number(self, value: float) -> str:
-        if not value:  # 0.0 == -0.0 as keys, but they render differently
-            return go_float(value)
+        if not value:  # 0.0 == -0.0 as keys, but they render differently (most counts are 0)
+            return _NEGATIVE_ZERO if copysign(1.0, value) < 0 else _ZERO
         formatted = self._formatted.get(value)
         if formatted is None:
             formatted = self._formatted[value] = go_float(value)
