@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from overseer.serve.render_ahead import MAX_SCRAPERS, RenderAhead, ScrapeCadence
+from overseer.serve.render_ahead import MARGIN, MAX_SCRAPERS, MIN_PASS, RenderAhead, ScrapeCadence
 from testbed.ports import fresh_domain_id
 from testbed.processes import running_exporter, running_simulator, wait_for
 from testbed.prometheus import running_prometheus
@@ -95,6 +95,72 @@ def test_the_thread_renders_once_shortly_before_each_expected_scrape() -> None:
     assert len(before_the_fourth) == 1
     assert 3.0 + 0.5 <= before_the_fourth[0] - started <= 4.5
     assert render_ahead.renders == 1 and render_ahead.failures == 0
+
+
+def slow_renders(seconds: float) -> tuple[list[tuple[float, float]], RenderAhead]:
+    """A render ahead whose every render takes `seconds`, and the (start, end) of each it made."""
+    renders: list[tuple[float, float]] = []
+
+    def render() -> None:
+        started = time.monotonic()
+        time.sleep(seconds)
+        renders.append((started, time.monotonic()))
+
+    return renders, RenderAhead(render, min_interval=1.0)
+
+
+def scrape_three_times(render_ahead: RenderAhead, started: float) -> None:
+    """Scrapes at 0, 1.5 and 3 s from `started`: the fourth is expected at 4.5 s."""
+    for scrape in range(3):
+        time.sleep(max(0.0, started + 1.5 * scrape - time.monotonic()))
+        render_ahead.scraped(PROMETHEUS)
+
+
+def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
+    renders, render_ahead = slow_renders(0.12)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        scrape_three_times(render_ahead, started)
+        time.sleep(max(0.0, started + 4.5 - time.monotonic()))
+        render_ahead.scraped(PROMETHEUS)
+        scraped = time.monotonic()
+        # Past the deadline, before the render ahead of the next scrape (at 6 s less twice 0.12 s and MARGIN).
+        time.sleep(max(0.0, started + 5.2 - time.monotonic()))
+    finally:
+        render_ahead.stop()
+    # The first begins half a second before 4.5 s; then pass after pass, each of what changed during the
+    # one before, and the last under way when the scrape began: it renders only the last moments' changes.
+    assert render_ahead.renders == 1 and render_ahead.failures == 0
+    assert render_ahead.passes == len(renders) - 1 >= 2
+    assert renders[0][0] - started >= 4.5 - MARGIN - 0.05
+    assert renders[-1][0] - 0.01 <= scraped <= renders[-1][1] + 0.05
+    assert render_ahead.last_seconds == pytest.approx(0.12, abs=0.05)  # the first pass's
+
+
+def test_passes_stop_half_a_second_after_a_scrape_that_does_not_come() -> None:
+    renders, render_ahead = slow_renders(0.12)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        scrape_three_times(render_ahead, started)
+        time.sleep(max(0.0, started + 6.0 - time.monotonic()))  # the scraper stopped after its third
+    finally:
+        render_ahead.stop()
+    assert render_ahead.passes >= 2
+    assert 4.5 + MARGIN <= renders[-1][1] - started <= 4.5 + MARGIN + 0.12 + 0.1
+
+
+def test_a_render_quicker_than_a_pass_is_worth_has_no_pass_after_it() -> None:
+    renders, render_ahead = slow_renders(MIN_PASS / 5)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        scrape_three_times(render_ahead, started)
+        time.sleep(max(0.0, started + 5.2 - time.monotonic()))
+    finally:
+        render_ahead.stop()
+    assert render_ahead.renders == 1 and render_ahead.passes == 0 and len(renders) == 1
 
 
 def test_a_render_that_fails_is_counted_and_the_thread_goes_on() -> None:

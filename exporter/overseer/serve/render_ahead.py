@@ -7,6 +7,12 @@ fixed interval and offset, so when it will ask next is known from when it asked 
 then, the fleet renders what changed (`Fleet.prepare_exposition`), and the scrape itself renders only what
 changed in the last moments. Nothing is served from the render ahead: a change still reaches the very
 next scrape.
+
+At 10,000 robots the render ahead itself takes seconds, and most robots change again while it runs: a
+scrape right after it would render most of them again. So while a render took long enough to matter, the
+fleet renders again, each time only what changed during the render before, until the scrape begins (or
+is half a second late): each pass is shorter than the one before, and the scrape waits for the last
+moments' changes alone.
 """
 
 from __future__ import annotations
@@ -24,7 +30,10 @@ log = logging.getLogger(__name__)
 
 MIN_INTERVAL = 5.0  # seconds between scrapes below which a scrape renders little: no render ahead
 STEADY = 0.1  # two gaps between scrapes this close (a share of the gap) make a scraper's interval
-MARGIN = 0.5  # seconds the render ahead begins before the scrape, beyond what the last one took
+LEAD = 2.0  # how many times as long as the last render ahead took the next begins before its scrape
+MARGIN = 0.5  # seconds the render ahead begins before the scrape, beyond LEAD times the last one's
+# A render ahead that took less leaves the scrape no more than that to render: no pass after it.
+MIN_PASS = 0.05
 MAX_SCRAPERS = 16  # scrapers followed at once (a client that scrapes once is forgotten first)
 
 
@@ -93,13 +102,16 @@ class RenderAhead:
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
         self.renders = 0  # renders ahead done
+        self.passes = 0  # renders again after them, of what changed during the render before
         self.failures = 0  # renders ahead that raised (a worker restarting)
-        self.last_seconds = 0.0  # how long the last render ahead took
+        self.last_seconds = 0.0  # how long the last render ahead took (its first pass)
+        self._scrapes = 0  # scrapes begun
 
     def scraped(self, scraper: str) -> None:
         """`scraper` began a scrape now."""
         with self._lock:
             self._cadence.scraped(scraper, self._clock())
+            self._scrapes += 1
         self._wake.set()
 
     def start(self) -> None:
@@ -126,29 +138,48 @@ class RenderAhead:
                 self._sleep(None)
                 continue
             due, interval = expected
-            # Begin as long before it as the last render took, and a margin; at most half an interval.
-            begin = due - min(self.last_seconds + MARGIN, interval / 2)
+            # Begin twice as long before it as the last render took (this one may take longer, and
+            # passes catch up with what changes meanwhile), and a margin; at most half an interval.
+            begin = due - min(LEAD * self.last_seconds + MARGIN, interval / 2)
             if begin > now:
                 self._sleep(begin - now)
                 continue
-            self._render()
+            with self._lock:
+                scrapes = self._scrapes
+            seconds = self._render()
+            if seconds is not None:
+                self.last_seconds = seconds
+                self.renders += 1
+                self._render_until_scraped(seconds, scrapes, due + MARGIN)
             rendered_for = due
+
+    def _render_until_scraped(self, seconds: float, scrapes: int, deadline: float) -> None:
+        """Render again what changed during the render before, until a scrape begins or `deadline`."""
+        while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() < deadline:
+            with self._lock:
+                if self._scrapes != scrapes:
+                    return
+            passed = self._render()
+            if passed is None:
+                return
+            self.passes += 1
+            seconds = passed
 
     def _sleep(self, seconds: float | None) -> None:
         """Until `seconds` have passed, a scrape began, or the thread is stopped."""
         self._wake.wait(seconds)
         self._wake.clear()
 
-    def _render(self) -> None:
+    def _render(self) -> float | None:
+        """Render what changed: how long it took, or None when it failed."""
         started = self._clock()
         try:
             self._prepare()
         except Exception:  # a worker restarting: the scrape renders it all, as without this thread
             self.failures += 1
             log.debug("could not render the series ahead of a scrape", exc_info=True)
-            return
-        self.last_seconds = self._clock() - started
-        self.renders += 1
+            return None
+        return self._clock() - started
 
 
 class RenderAheadCollector(Collector):
@@ -167,10 +198,16 @@ class RenderAheadCollector(Collector):
         )
         renders.add_metric(["done"], float(self._render_ahead.renders))
         renders.add_metric(["failed"], float(self._render_ahead.failures))
+        passes = CounterMetricFamily(
+            "overseer_exposition_render_ahead_passes",
+            "Renders again between a render ahead and its scrape, each of what changed during the last.",
+        )
+        passes.add_metric([], float(self._render_ahead.passes))
         seconds = GaugeMetricFamily(
             "overseer_exposition_render_ahead_seconds",
-            "How long the last render ahead of a scrape took.",
+            "How long the last render ahead of a scrape took (its first pass).",
         )
         seconds.add_metric([], self._render_ahead.last_seconds)
         yield renders
+        yield passes
         yield seconds
