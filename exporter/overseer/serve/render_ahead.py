@@ -32,8 +32,7 @@ MIN_INTERVAL = 5.0  # seconds between scrapes below which a scrape renders littl
 STEADY = 0.1  # two gaps between scrapes this close (a share of the gap) make a scraper's interval
 LEAD = 2.0  # how many times as long as the last render ahead took the next begins before its scrape
 MARGIN = 0.5  # seconds the render ahead begins before the scrape, beyond LEAD times the last one's
-# A render ahead that took less leaves the scrape no more than that to render: no pass after it.
-MIN_PASS = 0.05
+MIN_PASS = 0.05  # seconds: a render quicker leaves the scrape no more than that, so no pass after it
 MAX_SCRAPERS = 16  # scrapers followed at once (a client that scrapes once is forgotten first)
 
 
@@ -183,7 +182,7 @@ class RenderAhead:
 
 
 class RenderAheadCollector(Collector):
-    """`overseer_exposition_renders_ahead_total` and the seconds the last one took."""
+    """`overseer_exposition_renders_ahead_total`, the passes after them, and the seconds the last took."""
 
     def __init__(self, render_ahead: RenderAhead) -> None:
         """Tell of `render_ahead`."""
