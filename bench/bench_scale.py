@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
-from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, static_server
+from bench.bench_scrape import PROMETHEUS_ACCEPT, distinct_values, fetch, scrape_durations, static_server
 from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import ChangeProbe
 from bench.common import Row, cpu_seconds, emit, tree_cpu_seconds, tree_resident_bytes
@@ -200,6 +200,9 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
             learned = seconds - 3 * interval
             ours_learned = scrape_durations(prometheus, "overseer", learned) if learned > 0 else []
             floors_learned = scrape_durations(prometheus, "floor", learned) if learned > 0 else []
+            # The exporter's own wait for its series before the first byte, stored at each scrape.
+            render_seconds = 'overseer_exposition_last_render_seconds{job="overseer"}'
+            renders_learned = distinct_values(prometheus, render_seconds, learned) if learned > 0 else []
             window = f"{int(seconds)}s"
             attempts = prometheus.query(f'count_over_time(up{{job="overseer"}}[{window}])')
             succeeded = prometheus.query(f'sum_over_time(up{{job="overseer"}}[{window}])')
@@ -235,6 +238,12 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
                     "Prometheus: scrapes after three intervals, exporter",
                     len(ours_learned),
                     "scrapes",
+                ),
+                Row(
+                    "scale",
+                    "Prometheus: of which the exporter rendered before its first byte, median",
+                    statistics.median(renders_learned) if renders_learned else float("nan"),
+                    "s",
                 ),
             ]
             if ours_learned and floors_learned

@@ -149,9 +149,12 @@ def fetch(url: str, accept: str) -> tuple[bytes, str]:
 
 def scrape_durations(prometheus: Any, job: str, seconds: float) -> list[float]:
     """Prometheus's own scrape_duration_seconds of `job` over the last `seconds`."""
-    series = prometheus.query_range(
-        f'scrape_duration_seconds{{job="{job}"}}', seconds, f"{INTERVAL_SECONDS}s"
-    )
+    return distinct_values(prometheus, f'scrape_duration_seconds{{job="{job}"}}', seconds)
+
+
+def distinct_values(prometheus: Any, query: str, seconds: float) -> list[float]:
+    """The values `query`'s first series took over the last `seconds` (one a scrape), each once, sorted."""
+    series = prometheus.query_range(query, seconds, f"{INTERVAL_SECONDS}s")
     return sorted({float(value) for _, value in series[0]["values"]}) if series else []
 
 

@@ -40,6 +40,7 @@ from overseer.serve.http import OverseerServer
 from overseer.serve.lifecycle import RELOAD_PATH, reload_route
 from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
 from overseer.serve.render_ahead import RenderAhead, RenderAheadCollector
+from overseer.serve.render_timing import RenderTiming, RenderTimingCollector
 from overseer.serve.retire_api import RETIREMENTS_PATH, RetireApi
 from overseer.serve.web_config import load_web_config
 from overseer.serve.write_access import WriteAccess
@@ -118,6 +119,8 @@ class Exporter:
             from overseer.push.ros2_fleet import FleetDiagnosticsPublisher  # rclpy only with --ros2
 
             self.ros2_fleet = FleetDiagnosticsPublisher(config.ros2, self.fleet)
+        render_timing = RenderTiming()
+        extra_collectors.append(RenderTimingCollector(render_timing))
         if config.metrics.render_ahead:
             self.render_ahead = RenderAhead(self.fleet.prepare_exposition)
             extra_collectors.append(RenderAheadCollector(self.render_ahead))
@@ -139,6 +142,7 @@ class Exporter:
             routes=routes,
             robot_documents=maintenance_api.with_maintenance,
             on_scrape=None if self.render_ahead is None else self.render_ahead.scraped,
+            render_timing=render_timing,
         )
 
     def reload(self) -> str | None:

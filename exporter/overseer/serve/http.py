@@ -30,6 +30,7 @@ from overseer.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.api_query import ApiQueryError, parse_component_query, parse_robot_query
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
+from overseer.serve.render_timing import RenderTiming
 from overseer.serve.status_page import FAVICON, PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
 from overseer.serve.web_config import REALM, WebSecurity
 
@@ -66,13 +67,15 @@ class OverseerServer(ThreadingHTTPServer):
         routes: Mapping[str, JsonRoute] | None = None,
         robot_documents: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
         on_scrape: Callable[[str], None] | None = None,
+        render_timing: RenderTiming | None = None,
     ) -> None:
         """Serve `fleet` on `address` ('' host for every interface; IPv6 when the host has a colon).
 
         `/metrics` is written by `assembler`; `routes` are JSON paths of other outputs (the events, the
         maintenance windows), each answering its path and those below it; `robot_documents` adds to the
         robots' documents what other outputs know of them (their maintenance); `on_scrape` hears of every
-        `/metrics` request as it begins, by its client's address and user agent (`render_ahead`).
+        `/metrics` request as it begins, by its client's address and user agent (`render_ahead`);
+        `render_timing` times the fleet's series rendered for each.
         """
         if ":" in address[0]:
             self.address_family = socket.AF_INET6
@@ -81,6 +84,7 @@ class OverseerServer(ThreadingHTTPServer):
         self.routes = dict(routes or {})
         self.robot_documents = robot_documents or (lambda document: document)
         self.on_scrape = on_scrape or (lambda scraper: None)
+        self.render_timing = render_timing or RenderTiming()
         self.security = security or WebSecurity()
         self.connections = threading.BoundedSemaphore(MAX_CONNECTIONS)
         self.slots = threading.BoundedSemaphore(MAX_CONCURRENT_REQUESTS)
@@ -357,7 +361,7 @@ class _Handler(BaseHTTPRequestHandler):
     def _metrics(self, head_only: bool) -> None:
         self.server.on_scrape(f"{self.client_address[0]} {self.headers.get('User-Agent', '')}")
         fmt = negotiate_format(self.headers.get("Accept"))
-        parts = self.server.fleet.exposition_parts()
+        parts = self.server.render_timing.timed(self.server.fleet.exposition_parts)
         if accepts_gzip(self.headers.get("Accept-Encoding")):
             body = self.server.assembler.assemble_gzip(parts, fmt)
             self._send(200, body, fmt.content_type, head_only, encoding="gzip")
