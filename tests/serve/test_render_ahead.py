@@ -124,8 +124,8 @@ def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
     render_ahead.start()
     try:
         started = time.monotonic()
-        scrape_three_times(render_ahead, started)
-        time.sleep(max(0.0, started + 4.5 - time.monotonic()))
+        expected = scrape_three_times(render_ahead, started)
+        time.sleep(max(0.0, expected - time.monotonic()))
         render_ahead.scraped(PROMETHEUS)
         scraped = time.monotonic()
         # Long enough for a pass more, before the render ahead of the next scrape (about 5.25 s).
@@ -133,15 +133,47 @@ def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
     finally:
         render_ahead.stop()
     # The first begins half a second before 4.5 s; then pass after pass, each of what changed during the
-    # one before, and the last under way when the scrape began: it renders only the last moments' changes.
+    # one before, the last ending within half a pass of the scrape: it renders the last moments' changes.
     assert render_ahead.renders == 1 and render_ahead.failures == 0
     assert render_ahead.passes == len(renders) - 1 >= 2
     assert renders[0][0] - started >= 4.5 - MARGIN - 0.05
-    assert renders[-1][0] - 0.05 <= scraped <= renders[-1][1] + 0.05
+    assert scraped - 0.06 - 0.05 <= renders[-1][1] <= scraped + 0.06 + 0.05
     assert render_ahead.last_seconds == pytest.approx(0.12, abs=0.05)  # the first pass's
 
 
-def test_passes_stop_half_a_second_after_a_scrape_that_does_not_come() -> None:
+def passes_before_a_scrape_on_time(seconds: float) -> tuple[list[tuple[float, float]], float]:
+    """Renders of `seconds` each ahead of a scrape at 4.5 s: their (start, end), and when it scraped."""
+    renders, render_ahead = slow_renders(seconds)
+    render_ahead.start()
+    try:
+        started = time.monotonic()
+        expected = scrape_three_times(render_ahead, started)
+        time.sleep(max(0.0, expected - time.monotonic()))
+        render_ahead.scraped(PROMETHEUS)
+        scraped = time.monotonic()
+        time.sleep(max(0.0, started + 4.9 - time.monotonic()))
+    finally:
+        render_ahead.stop()
+    assert render_ahead.renders == 1 and render_ahead.passes == len(renders) - 1
+    return renders, scraped
+
+
+def test_a_pass_that_would_end_within_half_its_length_after_the_scrape_is_begun() -> None:
+    # 4.0 to 4.29 s, then a pass expected to end at 4.58 s, within 0.145 s of the scrape: begun.
+    renders, scraped = passes_before_a_scrape_on_time(0.29)
+    assert len(renders) == 2
+    assert renders[-1][0] < scraped < renders[-1][1]
+
+
+def test_a_pass_that_would_keep_the_scrape_waiting_longer_is_not_begun() -> None:
+    # 4.0 to 4.24 and 4.48 s; a third would end at 4.72 s, 0.22 s after the scrape: the scrape renders
+    # what it would have, without waiting for it.
+    renders, scraped = passes_before_a_scrape_on_time(0.24)
+    assert len(renders) == 2
+    assert renders[-1][1] < scraped
+
+
+def test_passes_stop_about_when_a_scrape_that_does_not_come_was_due() -> None:
     renders, render_ahead = slow_renders(0.12)
     render_ahead.start()
     try:
@@ -151,9 +183,9 @@ def test_passes_stop_half_a_second_after_a_scrape_that_does_not_come() -> None:
     finally:
         render_ahead.stop()
     assert render_ahead.passes >= 2
-    # The last pass began before the deadline, half a second after the scrape expected, and none after it.
-    assert expected + MARGIN - 0.2 <= renders[-1][0] < expected + MARGIN
-    assert renders[-1][1] - started <= 4.5 + MARGIN + 0.12 + 0.2
+    # The last pass ended within half a pass of the scrape expected, and none began after it.
+    assert expected - 0.06 - 0.05 <= renders[-1][1] <= expected + 0.06 + 0.05
+    assert len(renders) == render_ahead.passes + 1
 
 
 def test_a_render_quicker_than_a_pass_is_worth_has_no_pass_after_it() -> None:
@@ -214,5 +246,11 @@ def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp
             assert counts["failed"] == 0
             seconds = prometheus.query("overseer_exposition_render_ahead_seconds")
             assert 0 < float(seconds[0]["value"][1]) < 4
+            # Each scrape's own wait for the series, as Prometheus stored it beside its scrape duration.
+            rendered = prometheus.query("overseer_exposition_render_duration_seconds_count")
+            assert float(rendered[0]["value"][1]) >= 4
+            last = prometheus.query("overseer_exposition_last_render_seconds")
+            duration = prometheus.query('scrape_duration_seconds{job="overseer"}')
+            assert 0 < float(last[0]["value"][1]) < 4 and float(duration[0]["value"][1]) > 0
             robots = prometheus.query("count(ros_diagnostics_robot_up == 1)")
             assert robots and float(robots[0]["value"][1]) == 4

@@ -10,9 +10,11 @@ next scrape.
 
 At 10,000 robots the render ahead itself takes seconds, and most robots change again while it runs: a
 scrape right after it would render most of them again. So while a render took long enough to matter, the
-fleet renders again, each time only what changed during the render before, until the scrape begins (or
-is half a second late): each pass is shorter than the one before, and the scrape waits for the last
-moments' changes alone.
+fleet renders again, each time only what changed during the render before, until the scrape begins: each
+pass is shorter than the one before, and the scrape waits for the last moments' changes alone. A scrape
+that begins during a pass waits for it, and then renders what changed meanwhile; so a pass that would
+end later than half its length after the scrape is due is not begun (the scrape renders what it would
+have, and waits less): the passes stop at the scrape, or about when it was due.
 """
 
 from __future__ import annotations
@@ -149,12 +151,18 @@ class RenderAhead:
             if seconds is not None:
                 self.last_seconds = seconds
                 self.renders += 1
-                self._render_until_scraped(seconds, scrapes, due + MARGIN)
+                self._render_until_scraped(seconds, scrapes, due)
             rendered_for = due
 
-    def _render_until_scraped(self, seconds: float, scrapes: int, deadline: float) -> None:
-        """Render again what changed during the render before, until a scrape begins or `deadline`."""
-        while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() < deadline:
+    def _render_until_scraped(self, seconds: float, scrapes: int, due: float) -> None:
+        """Render again what changed during the render before, until a scrape begins or it is `due`.
+
+        A pass is expected to take as long as the one before (`seconds`); it is not begun when it would
+        end more than half of that after `due`. A scrape beginning at `due` would wait for the rest of the
+        pass and then render what changed during all of it, where without the pass it renders what
+        changed during the one before and since: less, once the pass would run past half its length.
+        """
+        while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() + seconds / 2 <= due:
             with self._lock:
                 if self._scrapes != scrapes:
                     return
