@@ -17,6 +17,7 @@ from overseer.app import Exporter
 from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.serve.render_ahead import RenderAheadCollector
+from overseer.serve.render_timing import RenderTimingCollector
 from overseer.sources import enabled_transports
 from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
 from testbed.in_process import call, in_process_exporter, publish
@@ -162,8 +163,11 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
         oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
         maintenance = MaintenanceCollector(running.maintenance, running.robot_names)
         assert running.render_ahead is not None  # on by default: its metrics come last
+        render_timing = RenderTimingCollector(running.server.render_timing)
         render_ahead = RenderAheadCollector(running.render_ahead)
-        registry = oracle_registry(oracle, running.history.collector, maintenance, render_ahead)
+        registry = oracle_registry(
+            oracle, running.history.collector, maintenance, render_timing, render_ahead
+        )
         assembler, fleet = running.server.assembler, running.fleet
         for fmt in (TEXT, OPENMETRICS):
             fast = assembler.assemble(fleet.exposition_parts(), fmt)
