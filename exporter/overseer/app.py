@@ -151,7 +151,7 @@ class Exporter:
 
     def robot_names(self) -> list[str]:
         """The names of the robots the fleet follows now."""
-        return [robot["robot"] for robot in self.fleet.robots_document()["robots"]]
+        return self.fleet.robot_names()
 
     @property
     def model(self) -> FleetModel | None:

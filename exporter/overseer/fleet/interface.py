@@ -56,6 +56,10 @@ class Fleet(Protocol):
         """GET /api/v1/robots: every robot, or those `query` selects."""
         ...
 
+    def robot_names(self) -> list[str]:
+        """The names of the robots `robots_document` lists, without their documents (every scrape asks)."""
+        ...
+
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """GET /api/v1/robots/<name>, or None for a robot nobody follows; `FleetPartUnavailable` meanwhile."""
         ...

@@ -122,6 +122,10 @@ class LocalFleet:
         """Every robot's summary, or those `query` selects."""
         return robots_document(self.model.snapshot(), query)
 
+    def robot_names(self) -> list[str]:
+        """The names of the robots followed now."""
+        return [robot.name for robot in self.model.snapshot().robots]
+
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """One robot with every component, or None."""
         snapshot = self.model.robot_snapshot(name)

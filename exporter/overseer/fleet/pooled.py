@@ -110,6 +110,10 @@ class PooledFleet:
         """Every worker's robots (those `query` selects), by name."""
         return merge_robots_documents([a.value for a in self.pool.ask_all("robots", query)], time.time())
 
+    def robot_names(self) -> list[str]:
+        """Every worker's robots' names (none of a worker that does not answer)."""
+        return [name for answer in self.pool.ask_all("names") for name in answer.value]
+
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """The robot from the one worker that follows it, or None."""
         for index, owner in enumerate(self._owners):

@@ -52,6 +52,8 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
         return None
     if kind == "robots":
         return fleet.robots_document(argument)
+    if kind == "names":
+        return fleet.robot_names()
     if kind == "robot":
         return fleet.robot_document(argument)
     if kind == "components":
