@@ -95,7 +95,7 @@ def test_workers_serve_every_dds_robot_once_through_metrics_api_and_check(
         received = samples["overseer_messages_total"][(("result", "received"), ("transport", "dds"))]
         assert received >= ROBOTS
         assert len(samples["overseer_build_info"]) == 1
-        # The maintenance series name every worker's robots once (from their names, not their documents).
+        # The maintenance series name every worker's robots (from their names, not their documents).
         maintenance = samples["ros_diagnostics_robot_maintenance"]
         assert sorted(dict(labels)["robot"] for labels in maintenance) == sorted(expected)
         assert set(maintenance.values()) == {0.0}

@@ -10,7 +10,6 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
-from typing import NamedTuple
 
 import pytest
 
@@ -120,18 +119,8 @@ def scrape_three_times(render_ahead: RenderAhead, started: float) -> float:
     return 2 * times[2] - times[1]
 
 
-class ScrapeOnTime(NamedTuple):
-    """Renders ahead of a scrape at 4.5 s: their (start, end), when the test started and scraped."""
-
-    renders: list[tuple[float, float]]
-    started: float
-    scraped: float
-    render_ahead: RenderAhead
-
-
-def passes_before_a_scrape_on_time(seconds: float) -> ScrapeOnTime:
-    """Renders of `seconds` each ahead of the fourth scrape, which comes when expected (about 4.5 s)."""
-    renders, render_ahead = slow_renders(seconds)
+def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
+    renders, render_ahead = slow_renders(0.12)
     render_ahead.start()
     try:
         started = time.monotonic()
@@ -143,34 +132,43 @@ def passes_before_a_scrape_on_time(seconds: float) -> ScrapeOnTime:
         time.sleep(max(0.0, started + 4.9 - time.monotonic()))
     finally:
         render_ahead.stop()
-    assert render_ahead.renders == 1 and render_ahead.failures == 0
-    assert render_ahead.passes == len(renders) - 1
-    return ScrapeOnTime(renders, started, scraped, render_ahead)
-
-
-def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
-    renders, started, scraped, render_ahead = passes_before_a_scrape_on_time(0.12)
     # The first begins half a second before 4.5 s; then pass after pass, each of what changed during the
     # one before, the last ending within half a pass of the scrape: it renders the last moments' changes.
-    assert render_ahead.passes >= 2
+    assert render_ahead.renders == 1 and render_ahead.failures == 0
+    assert render_ahead.passes == len(renders) - 1 >= 2
     assert renders[0][0] - started >= 4.5 - MARGIN - 0.05
     assert scraped - 0.06 - 0.05 <= renders[-1][1] <= scraped + 0.06 + 0.05
     assert render_ahead.last_seconds == pytest.approx(0.12, abs=0.05)  # the first pass's
 
 
+def passes_toward(due: float, seconds: float) -> list[float]:
+    """When each pass after a render ahead began, every render taking `seconds` on a clock moved by hand.
+
+    The render ahead ended at 0; the scrape is `due` and does not begin meanwhile.
+    """
+    now = [0.0]
+    began: list[float] = []
+
+    def render() -> None:
+        began.append(now[0])
+        now[0] += seconds
+
+    RenderAhead(render, clock=lambda: now[0])._render_until_scraped(seconds, 0, due)
+    return began
+
+
 def test_a_pass_that_would_end_within_half_its_length_after_the_scrape_is_begun() -> None:
-    # 4.0 to 4.29 s, then a pass expected to end at 4.58 s, within 0.145 s of the scrape: begun.
-    renders, _, scraped, _ = passes_before_a_scrape_on_time(0.29)
-    assert len(renders) == 2
-    assert renders[-1][0] < scraped < renders[-1][1]
+    # The second pass, from 0.29 s, ends at 0.58 s: 0.08 s after the scrape, within 0.145 s.
+    assert passes_toward(0.5, 0.29) == [0.0, 0.29]
+    # Passes of 0.2 s toward a scrape at 1 s: the last, from 0.8 s, ends at it; one from 1 s would not.
+    assert passes_toward(1.0, 0.2) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8])
 
 
 def test_a_pass_that_would_keep_the_scrape_waiting_longer_is_not_begun() -> None:
-    # 4.0 to 4.24 and 4.48 s; a third would end at 4.72 s, 0.22 s after the scrape: the scrape renders
-    # what it would have, without waiting for it.
-    renders, _, scraped, _ = passes_before_a_scrape_on_time(0.24)
-    assert len(renders) == 2
-    assert renders[-1][1] < scraped
+    # A third pass, from 0.48 s, would end at 0.72 s, 0.22 s after the scrape: the scrape renders what
+    # it would have, without waiting for it.
+    assert passes_toward(0.5, 0.24) == [0.0, 0.24]
+    assert passes_toward(0.1, 0.3) == []  # the scrape is nearer than half a pass
 
 
 def test_passes_stop_about_when_a_scrape_that_does_not_come_was_due() -> None:
@@ -250,7 +248,9 @@ def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp
             rendered = prometheus.query("overseer_exposition_render_duration_seconds_count")
             assert float(rendered[0]["value"][1]) >= 4
             last = prometheus.query("overseer_exposition_last_render_seconds")
-            duration = prometheus.query('scrape_duration_seconds{job="overseer"}')
-            assert 0 < float(last[0]["value"][1]) < 4 and float(duration[0]["value"][1]) > 0
+            assert 0 < float(last[0]["value"][1]) < 4
+            # Stored at the scrape it timed, and a part of it (one query: no scrape comes between).
+            within = prometheus.query("overseer_exposition_last_render_seconds <= scrape_duration_seconds")
+            assert len(within) == 1
             robots = prometheus.query("count(ros_diagnostics_robot_up == 1)")
             assert robots and float(robots[0]["value"][1]) == 4

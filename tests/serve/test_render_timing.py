@@ -32,9 +32,11 @@ class _SteppedClock:
     """A clock that reads `step` seconds later at each call."""
 
     def __init__(self, step: float) -> None:
+        """At 0, moving `step` seconds a reading."""
         self.now, self.step = 0.0, step
 
     def __call__(self) -> float:
+        """The time, `step` later than the last reading."""
         self.now += self.step
         return self.now
 

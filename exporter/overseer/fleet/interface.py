@@ -57,7 +57,7 @@ class Fleet(Protocol):
         ...
 
     def robot_names(self) -> list[str]:
-        """The names of the robots `robots_document` lists, without their documents (every scrape asks)."""
+        """The names of the robots `robots_document` lists, in no order, without their documents."""
         ...
 
     def robot_document(self, name: str) -> dict[str, Any] | None:

@@ -160,7 +160,8 @@ class RenderAhead:
         A pass is expected to take as long as the one before (`seconds`); it is not begun when it would
         end more than half of that after `due`. A scrape beginning at `due` would wait for the rest of the
         pass and then render what changed during all of it, where without the pass it renders what
-        changed during the one before and since: less, once the pass would run past half its length.
+        changed during the one before and since: less, once the pass would run past half its length (for
+        passes as long as the one before; shorter ones would pay off a little later).
         """
         while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() + seconds / 2 <= due:
             with self._lock:

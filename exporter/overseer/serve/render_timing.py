@@ -1,9 +1,10 @@
-"""How long `/metrics` waited for the fleet's series before its first byte, scrape after scrape.
+"""How long `/metrics` waited for the fleet's series, scrape after scrape.
 
 Prometheus's `scrape_duration_seconds` counts everything from its request to the last sample stored; this
-is the exporter's share before the first byte: rendering what changed since the render before, and
-waiting for a render under way (a render ahead's pass, another scrape). Set beside Prometheus's figure,
-it tells a slow exporter from a slow Prometheus.
+is the largest part of the exporter's share at a large fleet: rendering what changed since the render
+before, and waiting for a render under way (a render ahead's pass, another scrape). Not counted: writing
+the exporter's own families after the series (tens of milliseconds) and sending the answer. Set beside
+Prometheus's figure, it tells a slow render from a slow Prometheus.
 """
 
 from __future__ import annotations
@@ -59,13 +60,13 @@ class RenderTimingCollector(Collector):
         count, total, last = self._timing.read()
         yield SummaryMetricFamily(
             "overseer_exposition_render_duration_seconds",
-            "Time /metrics took to have the fleet's series rendered, before its first byte.",
+            "Time /metrics waited for the fleet's series to be rendered, before the rest of its answer.",
             count_value=count,
             sum_value=total,
         )
         latest = GaugeMetricFamily(
             "overseer_exposition_last_render_seconds",
-            "Time the last /metrics took to have the fleet's series rendered, before its first byte.",
+            "Time the last /metrics waited for the fleet's series to be rendered.",
         )
         latest.add_metric([], last)
         yield latest
