@@ -101,7 +101,7 @@ class Exporter:
         if config.inventory.file is not None:
             extra_collectors.append(InventoryCollector(self.inventory))
         extra_collectors += self.fleet.collectors()
-        extra_collectors.append(MaintenanceCollector(self.maintenance, self.robot_names))
+        extra_collectors.append(MaintenanceCollector(self.maintenance, self.fleet.robot_names))
         effects: list[EffectStats] = []
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(
@@ -148,10 +148,6 @@ class Exporter:
     def reload(self) -> str | None:
         """Read the inventory file again (SIGHUP, POST /-/reload): None when it was, else why not."""
         return self.inventory.reload()
-
-    def robot_names(self) -> list[str]:
-        """The names of the robots the fleet follows now."""
-        return self.fleet.robot_names()
 
     @property
     def model(self) -> FleetModel | None:

@@ -161,7 +161,7 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
         publish(running, "robot1", (2, "/a", "bad"), (1, "/b", "warm"))
         assert running.model is not None and running.history is not None
         oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
-        maintenance = MaintenanceCollector(running.maintenance, running.robot_names)
+        maintenance = MaintenanceCollector(running.maintenance, running.fleet.robot_names)
         assert running.render_ahead is not None  # on by default: its metrics come last
         render_timing = RenderTimingCollector(running.server.render_timing)
         render_ahead = RenderAheadCollector(running.render_ahead)
