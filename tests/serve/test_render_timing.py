@@ -8,7 +8,6 @@ real Prometheus reads them in `test_render_ahead.py`.
 from __future__ import annotations
 
 import re
-import threading
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -24,6 +23,7 @@ from overseer.model import FleetModel
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
 from overseer.serve.render_timing import RenderTiming, RenderTimingCollector
+from testbed.model_server import serving_fleet
 
 RENDER_SECONDS = 0.2
 
@@ -75,13 +75,8 @@ def _slow_server() -> Iterator[OverseerServer]:
     timing = RenderTiming()
     fleet = _SlowFleet(model, [], FleetExposition(model, re.compile(".*")))
     assembler = ExpositionAssembler(["dds"], [RenderTimingCollector(timing)])
-    server = OverseerServer(("127.0.0.1", 0), fleet, assembler, render_timing=timing)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
+    with serving_fleet(fleet, assembler, render_timing=timing) as server:
         yield server
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def _scrape(server: OverseerServer) -> dict[str, float]:
