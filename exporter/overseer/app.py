@@ -28,7 +28,6 @@ from overseer.inventory.registry import RobotRegistry
 from overseer.inventory.reload import InventoryReloader
 from overseer.inventory.retirement import Retirements
 from overseer.maintenance.effects import EffectsCollector, EffectStats
-from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.maintenance.schedule import MaintenanceSchedule, open_schedule
 from overseer.model import FleetModel
 from overseer.push.alertmanager_silences import AlertmanagerSilences
@@ -39,6 +38,7 @@ from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.http import OverseerServer
 from overseer.serve.lifecycle import RELOAD_PATH, reload_route
 from overseer.serve.maintenance_api import MAINTENANCE_PATH, MaintenanceApi
+from overseer.serve.maintenance_lines import MaintenanceLines
 from overseer.serve.render_ahead import RenderAhead, RenderAheadCollector
 from overseer.serve.render_timing import RenderTiming, RenderTimingCollector
 from overseer.serve.retire_api import RETIREMENTS_PATH, RetireApi
@@ -96,12 +96,11 @@ class Exporter:
         )
         self.inventory.follow_with(self.fleet.set_inventory)
         self.maintenance = open_schedule(config.maintenance, config.events.path, events)
-        # Appended to /metrics after the fleet's series, in this order.
+        # Appended to /metrics after the fleet's series, in this order; the maintenance lines last.
         extra_collectors: list[Collector] = [] if self.history is None else [self.history.collector]
         if config.inventory.file is not None:
             extra_collectors.append(InventoryCollector(self.inventory))
         extra_collectors += self.fleet.collectors()
-        extra_collectors.append(MaintenanceCollector(self.maintenance, self.fleet.robot_names))
         effects: list[EffectStats] = []
         if config.icinga2 is not None:
             self.icinga2_push = Icinga2Push(
@@ -124,7 +123,10 @@ class Exporter:
         if config.metrics.render_ahead:
             self.render_ahead = RenderAhead(self.fleet.prepare_exposition)
             extra_collectors.append(RenderAheadCollector(self.render_ahead))
-        assembler = ExpositionAssembler(enabled_transports(config), extra_collectors, config.web.external_url)
+        maintenance_lines = MaintenanceLines(self.maintenance, self.fleet.robot_names)
+        assembler = ExpositionAssembler(
+            enabled_transports(config), extra_collectors, config.web.external_url, [maintenance_lines]
+        )
         access = WriteAccess(config.maintenance.writers, config.web.enable_maintenance_api)
         maintenance_api = MaintenanceApi(self.maintenance, access)
         retirements = Retirements(self.fleet, self.memory, events)

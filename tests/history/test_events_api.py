@@ -14,11 +14,11 @@ import bcrypt
 import pytest
 
 from overseer.app import Exporter
-from overseer.maintenance.metrics import MaintenanceCollector
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from overseer.serve.render_ahead import RenderAheadCollector
 from overseer.serve.render_timing import RenderTimingCollector
 from overseer.sources import enabled_transports
+from support.maintenance_oracle import MaintenanceOracle
 from support.oracle import OracleCollector, oracle_openmetrics, oracle_registry, oracle_text
 from testbed.in_process import call, in_process_exporter, publish
 
@@ -161,12 +161,12 @@ def test_metrics_carry_the_event_counts_byte_identical_to_prometheus_client(tmp_
         publish(running, "robot1", (2, "/a", "bad"), (1, "/b", "warm"))
         assert running.model is not None and running.history is not None
         oracle = OracleCollector(running.model, re.compile(".*"), enabled_transports(running.config))
-        maintenance = MaintenanceCollector(running.maintenance, running.fleet.robot_names)
-        assert running.render_ahead is not None  # on by default: its metrics come last
+        maintenance = MaintenanceOracle(running.maintenance, running.fleet.robot_names)
+        assert running.render_ahead is not None  # on by default: its metrics come before maintenance
         render_timing = RenderTimingCollector(running.server.render_timing)
         render_ahead = RenderAheadCollector(running.render_ahead)
         registry = oracle_registry(
-            oracle, running.history.collector, maintenance, render_timing, render_ahead
+            oracle, running.history.collector, render_timing, render_ahead, maintenance
         )
         assembler, fleet = running.server.assembler, running.fleet
         for fmt in (TEXT, OPENMETRICS):

@@ -139,6 +139,25 @@ WEB_INFO = MetricFamily(
     "The URL users reach this exporter at (web.external_url), for links in alerts; always 1.",
     ("external_url",),
 )
+MAINTENANCE = MetricFamily(
+    "ros_diagnostics_robot_maintenance",
+    "gauge",
+    "1 while the robot is in a maintenance window, else 0.",
+    ("robot",),
+)
+MAINTENANCE_END = MetricFamily(
+    "ros_diagnostics_robot_maintenance_end_timestamp_seconds",
+    "gauge",
+    "Unix time the maintenance window the robot is in ends.",
+    ("robot",),
+    unit="seconds",
+)
+MAINTENANCE_WINDOWS = MetricFamily(
+    "overseer_maintenance_windows",
+    "gauge",
+    "Maintenance windows by state: active, scheduled.",
+    ("state",),
+)
 
 # Per robot and per component: a model's rendered part holds their lines, in this order.
 FLEET_FAMILIES = (
@@ -164,5 +183,7 @@ EXPORTER_FAMILIES = (
     BUILD_INFO,
     WEB_INFO,
 )
+# Every robot's maintenance state, last.
+MAINTENANCE_FAMILIES = (MAINTENANCE, MAINTENANCE_END, MAINTENANCE_WINDOWS)
 FORGET_REASONS = ("expired", "retired", "unlisted", "reattributed")
 CONTRACT_FAMILIES = FLEET_FAMILIES + EXPORTER_FAMILIES

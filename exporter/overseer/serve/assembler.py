@@ -1,7 +1,9 @@
 """One exposition from rendered parts (one per ingest worker): headers once, lines of every part, counters.
 
 The same parts make any format the scrape asked for: the formats differ only in their headers and end.
-A gzip answer is laid together from the parts' deflated lines without compressing them again.
+A gzip answer is laid together from the parts' deflated lines without compressing them again. After the
+exporter's own families come the extra collectors' (by prometheus-client), then the families their
+owners render and keep themselves (a line a robot: the maintenance state).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import functools
 from collections import Counter
 from collections.abc import Iterable, Sequence
+from typing import Protocol
 
 from prometheus_client.registry import Collector, CollectorRegistry
 
@@ -22,6 +25,18 @@ from overseer.fleet.metric_values import DROP_REASONS, message_counts
 from overseer.serve.exposition_formats import TEXT, ExpositionFormat
 
 
+class RenderedFamilies(Protocol):
+    """Families whose owner renders them, in any format, as text or as a deflated piece."""
+
+    def text(self, fmt: ExpositionFormat) -> bytes:
+        """The families' headers and lines in `fmt`."""
+        ...  # pragma: no cover
+
+    def deflated(self, fmt: ExpositionFormat) -> Deflated:
+        """`text(fmt)`, deflated as a piece of a gzip answer."""
+        ...  # pragma: no cover
+
+
 class ExpositionAssembler:
     """Joins parts (robots disjoint) into one exposition; counters are summed, extra collectors appended."""
 
@@ -30,8 +45,10 @@ class ExpositionAssembler:
         transports: Iterable[str],
         extra_collectors: Iterable[Collector] = (),
         external_url: str | None = None,
+        rendered: Iterable[RenderedFamilies] = (),
     ) -> None:
-        """Add zero message counts for `transports`, then append `extra_collectors` and the web info."""
+        """Zero message counts for `transports`, the web info; then `extra_collectors`, then `rendered`."""
+        self._rendered = tuple(rendered)
         self._extra = CollectorRegistry(auto_describe=False)
         for collector in extra_collectors:
             self._extra.register(collector)
@@ -49,6 +66,8 @@ class ExpositionAssembler:
             body.append(fmt.header(family).encode())
             body.extend(inflate(part.families[index]) for part in parts)
         body.append(self._rest(parts, fmt))
+        body.extend(families.text(fmt) for families in self._rendered)
+        body.append(fmt.end)
         return b"".join(body)  # joined once: no copy of the whole body on the way
 
     def assemble_gzip(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> bytes:
@@ -58,11 +77,13 @@ class ExpositionAssembler:
             pieces.append(_deflated_header(family, fmt))
             pieces.extend(part.families[index] for part in parts)
         pieces.append(deflate(self._rest(parts, fmt)))
+        pieces.extend(families.deflated(fmt) for families in self._rendered)
+        pieces.append(_deflated_end(fmt))
         return gzip_member(pieces)
 
     def _rest(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> bytes:
-        """What follows the fleet's families: the exporter's own, the extra collectors', the end."""
-        return self._exporter_families(parts, fmt).encode() + fmt.extras(self._extra) + fmt.end
+        """What follows the fleet's families: the exporter's own, the extra collectors'."""
+        return self._exporter_families(parts, fmt).encode() + fmt.extras(self._extra)
 
     def _exporter_families(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> str:
         message_totals: Counter[tuple[str, str]] = Counter()
@@ -110,3 +131,8 @@ class ExpositionAssembler:
 @functools.cache
 def _deflated_header(family: MetricFamily, fmt: ExpositionFormat) -> Deflated:
     return deflate(fmt.header(family).encode())
+
+
+@functools.cache
+def _deflated_end(fmt: ExpositionFormat) -> Deflated:
+    return deflate(fmt.end)

@@ -1,8 +1,8 @@
-"""Maintenance in /metrics: which robots are in a window and until when, and how many windows there are.
+"""The test oracle of the maintenance families: prometheus-client's collector over the same schedule.
 
-# HELP ros_diagnostics_robot_maintenance 1 while the robot is in a maintenance window, else 0.
-# TYPE ros_diagnostics_robot_maintenance gauge
-ros_diagnostics_robot_maintenance{robot="robot3"} 1.0
+Production writes these lines itself and keeps them (`overseer.serve.maintenance_lines`); this collector
+builds fresh families at every scrape, the straightforward way, so the tests can hold the two
+byte-identical in the text format and in OpenMetrics.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from prometheus_client.registry import Collector
 from overseer.maintenance.schedule import MaintenanceSchedule
 
 
-class MaintenanceCollector(Collector):
+class MaintenanceOracle(Collector):
     """The maintenance state of every robot `robots()` names (the fleet's), and the windows counted."""
 
     def __init__(self, schedule: MaintenanceSchedule, robots: Callable[[], Iterable[str]]) -> None:
