@@ -111,6 +111,37 @@ def test_a_robot_that_comes_or_goes_changes_the_lines(schedule: MaintenanceSched
     assert b'robot="robot1"' not in inflate(lines.deflated(TEXT))
 
 
+def test_a_robot_replaced_by_another_changes_the_lines(schedule: MaintenanceSchedule) -> None:
+    fleet = Fleet(["robot1", "robot2"])
+    lines = MaintenanceLines(schedule, fleet.robot_names)
+    lines.text(TEXT)
+    fleet.names[1] = "robot3"
+    assert lines.text(TEXT) == oracle(schedule, fleet, TEXT)
+
+
+def test_an_empty_fleet_has_the_headers_and_the_counts(schedule: MaintenanceSchedule) -> None:
+    fleet = Fleet([])
+    lines = MaintenanceLines(schedule, fleet.robot_names)
+    for fmt in FORMATS:
+        assert lines.text(fmt) == oracle(schedule, fleet, fmt)
+        assert lines.text(fmt).count(b"# HELP") == 3
+
+
+def test_one_window_ending_as_another_starts_changes_the_lines(
+    schedule: MaintenanceSchedule, clock: Clock
+) -> None:
+    fleet = Fleet(["robot1", "robot2"])
+    first = schedule.open(RobotSelector.parse("robot1"), None, clock.now + 600, "first", "ops")
+    lines = MaintenanceLines(schedule, fleet.robot_names)
+    assert b'robot="robot1"} 1.0' in inflate(lines.deflated(OPENMETRICS))
+    schedule.end(first.key, "ops")
+    schedule.open(RobotSelector.parse("robot2"), None, clock.now + 600, "second", "ops")
+    # The same robots, one window active, none scheduled: only who is in it, and its end, differ.
+    after = inflate(lines.deflated(OPENMETRICS))
+    assert b'ros_diagnostics_robot_maintenance{robot="robot2"} 1.0' in after
+    assert after == oracle(schedule, fleet, OPENMETRICS)
+
+
 def test_a_window_that_starts_or_ends_changes_the_lines(schedule: MaintenanceSchedule, clock: Clock) -> None:
     fleet = Fleet(["robot1", "robot2"])
     schedule.open(RobotSelector.parse("robot1"), clock.now + 60, clock.now + 120, "soon", "ops")

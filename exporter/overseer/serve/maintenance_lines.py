@@ -5,7 +5,7 @@
 ros_diagnostics_robot_maintenance{robot="robot3"} 1.0
 
 Every robot the fleet names has a line at every scrape, in or out of a window. prometheus-client made
-those 10,000 lines at 10,000 robots in 30 ms a scrape; here they are written as the exposition formats
+those 10,000 lines at 10,000 robots in 34 ms a scrape; here they are written as the exposition formats
 write them (the same bytes) and kept, with their deflated piece, until a robot comes or goes, a window
 starts or ends, or the windows' counts move.
 """
@@ -32,22 +32,25 @@ class _State(NamedTuple):
 
 
 class _Rendered(NamedTuple):
+    """A state's lines in one format, and their deflated piece once a gzip answer needed it."""
+
     state: _State
     text: bytes
-    deflated: Deflated | None  # made at the first gzip answer for this state
+    deflated: Deflated | None
 
 
 class MaintenanceLines:
     """The maintenance state of every robot `robots()` names (the fleet's), and the windows counted.
 
-    Scrapes at once may each render a state: every answer kept is whole, the last one kept stays.
+    Scrapes at once may each render a state: each answers whole lines of one state, and at worst one
+    replaces the other's newer lines with its own, rendered again at the next scrape.
     """
 
     def __init__(self, schedule: MaintenanceSchedule, robots: Callable[[], Iterable[str]]) -> None:
         """Judge `robots()` (the fleet's robot names now) against `schedule`'s windows at each scrape."""
         self._schedule = schedule
         self._robots = robots
-        self._names: tuple[list[str], tuple[str, ...]] = ([], ())  # the fleet's last answer, sorted
+        self._last_answer: tuple[list[str], tuple[str, ...]] = ([], ())  # the fleet's names, and sorted
         self._rendered: dict[bool, _Rendered] = {}  # by format: OpenMetrics or not
 
     def text(self, fmt: ExpositionFormat) -> bytes:
@@ -60,7 +63,8 @@ class MaintenanceLines:
         if rendered.deflated is not None:
             return rendered.deflated
         piece = deflate(rendered.text)
-        self._rendered[fmt.openmetrics] = rendered._replace(deflated=piece)
+        if self._rendered.get(fmt.openmetrics) is rendered:
+            self._rendered[fmt.openmetrics] = rendered._replace(deflated=piece)
         return piece
 
     def _current(self, fmt: ExpositionFormat) -> _Rendered:
@@ -87,16 +91,16 @@ class MaintenanceLines:
     def _sorted_names(self) -> tuple[str, ...]:
         """The fleet's names, sorted once for as long as the fleet answers the same list."""
         names = list(self._robots())
-        last, ordered = self._names
+        last, ordered = self._last_answer
         if names != last:
             ordered = tuple(sorted(set(names)))
-            self._names = (names, ordered)
+            self._last_answer = (names, ordered)
         return ordered
 
 
 def _render(state: _State, fmt: ExpositionFormat) -> bytes:
     """`state` as prometheus-client writes these families, in `fmt`."""
-    in_window = dict(state.ends)
+    in_window = {robot for robot, _ in state.ends}
     lines = [fmt.header(contract.MAINTENANCE)]
     for robot in state.robots:
         flag = "1.0" if robot in in_window else "0.0"
