@@ -260,6 +260,12 @@ def measure_prometheus(robots: int, components: int, workers: int, seconds: floa
         ),
         Row("scrape", f"{label}: scrapes measured, exporter", len(ours), "scrapes"),
         Row("scrape", f"{label}: scrapes measured, floor", len(floors), "scrapes"),
+        Row(
+            "scrape",
+            f"{label}: scrapes measured, floor in the exporter's pieces",
+            len(pieces_floors),
+            "scrapes",
+        ),
     ]
     for use_gzip in (False, True):
         kind = "gzip" if use_gzip else "plain"

@@ -7,7 +7,7 @@ ros_diagnostics_robot_maintenance{robot="robot3"} 1.0
 Every robot the fleet names has a line at every scrape, in or out of a window. prometheus-client made
 those 10,000 lines at 10,000 robots in 34 ms a scrape; here they are written as the exposition formats
 write them (the same bytes) and kept, with their deflated piece, until a robot comes or goes, a window
-starts or ends, or the windows' counts move.
+starts, ends or moves its end, or the windows' counts move.
 """
 
 from __future__ import annotations
