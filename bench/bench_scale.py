@@ -28,7 +28,8 @@ DDS writes on a fresh loopback domain instead, with no router and no probe (it p
 With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
 the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
 same Prometheus, a static server answering the exporter's own bytes: Prometheus's own
-`scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed; with
+`scrape_duration_seconds` of both, their ratio (target <= 1.3x) and the scrapes that failed (with
+`--floor-pieces` a third static server answers the same text gzipped in the exporter's pieces); with
 `--rules`, then a Prometheus with the shipped default config and rules (scraping every
 `--scrape-interval`) gives each rule group's evaluation time as a share of its interval (target <= 10 %,
 with the generator's 2 % of robots in trouble), and the rules that cost the most, from /api/v1/rules.
@@ -183,11 +184,22 @@ def floor_counter(wires: Wiring, directory: Path, wanted: bool) -> Iterator[Coun
         yield counter
 
 
-def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
-    """Prometheus scraping the exporter and a static copy of its bytes for `seconds`: its own durations."""
-    body, content_type = fetch(exporter_url + "/metrics", PROMETHEUS_ACCEPT)
-    with static_server(body, content_type) as floor:
+def scrape_against_floor(
+    exporter_url: str, directory: Path, seconds: float, interval: int, pieces: bool = False
+) -> list[Row]:
+    """Prometheus scraping the exporter and a static copy of its bytes for `seconds`: its own durations.
+
+    With `pieces`, a third static server answers the same text gzipped as the exporter does (its robots'
+    deflated pieces end to end, where the floor's is one gzip stream): what the pieces cost Prometheus.
+    """
+    gzipped, content_type = fetch(exporter_url + "/metrics", PROMETHEUS_ACCEPT, "gzip")
+    body = gzip.decompress(gzipped)
+    with (
+        static_server(body, content_type) as floor,
+        static_server(body, content_type, gzipped) as floor_pieces,
+    ):
         jobs = [("overseer", exporter_url.removeprefix("http://")), ("floor", floor)]
+        jobs += [("floor_pieces", floor_pieces)] if pieces else []
         config = {
             "global": {"scrape_interval": f"{interval}s", "scrape_timeout": f"{interval}s"},
             "scrape_configs": [{"job_name": job, "static_configs": [{"targets": [t]}]} for job, t in jobs],
@@ -196,6 +208,7 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
             time.sleep(seconds)
             ours = scrape_durations(prometheus, "overseer", seconds)
             floors = scrape_durations(prometheus, "floor", seconds)
+            pieces_floors = scrape_durations(prometheus, "floor_pieces", seconds) if pieces else []
             # Once the exporter has learned Prometheus's interval (metrics.render_ahead: three scrapes).
             learned = seconds - 3 * interval
             ours_learned = scrape_durations(prometheus, "overseer", learned) if learned > 0 else []
@@ -225,6 +238,24 @@ def scrape_against_floor(exporter_url: str, directory: Path, seconds: float, int
         Row("scale", "Prometheus: scrape_duration_seconds, exporter (max)", max(ours, default=0.0), "s"),
         Row("scale", "Prometheus: scrape_duration_seconds, floor (median)", floor_median, "s"),
         Row("scale", "Prometheus: exporter / floor", ratio, "x", f"<= {FLOOR_RATIO}", ratio <= FLOOR_RATIO),
+        *(
+            [
+                Row(
+                    "scale",
+                    "Prometheus: floor in the exporter's gzip pieces / floor, medians",
+                    statistics.median(pieces_floors) / floor_median,
+                    "x",
+                ),
+                Row(
+                    "scale",
+                    "Prometheus: exporter / floor in its gzip pieces, medians",
+                    ours_median / statistics.median(pieces_floors),
+                    "x",
+                ),
+            ]
+            if pieces_floors
+            else []
+        ),
         *(
             [
                 Row(
@@ -363,6 +394,7 @@ def run(
     floor: bool = False,
     page: bool = False,
     head_start: float = 0.0,
+    floor_pieces: bool = False,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
@@ -371,6 +403,7 @@ def run(
     does not deliver. `page`: after the window, while the fleet goes on publishing, Chromium loads the
     status page and the JSON API and event history are read. `head_start`: the robots are declared that
     many seconds before they publish (a router takes seconds to pass a large fleet's tokens on).
+    `floor_pieces`: Prometheus also scrapes the floor's text gzipped as the exporter gzips it.
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
@@ -428,7 +461,7 @@ def run(
                 if prometheus_seconds:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
                     prometheus_rows = scrape_against_floor(
-                        exporter.url, Path(tmp), prometheus_seconds, interval
+                        exporter.url, Path(tmp), prometheus_seconds, interval, floor_pieces
                     )
                     if rules:
                         prometheus_rows += shipped_rules_rows(
@@ -562,6 +595,8 @@ def check_window(options: argparse.Namespace) -> None:
         raise ValueError(f"--scrape-interval: must be at least 1 s, got {options.scrape_interval}")
     if options.rules and not options.prometheus_seconds:
         raise ValueError("--rules: needs --prometheus-seconds (the rules run in that Prometheus)")
+    if options.floor_pieces and not options.prometheus_seconds:
+        raise ValueError("--floor-pieces: needs --prometheus-seconds (that Prometheus scrapes it)")
     check_head_start(options.head_start)
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
@@ -604,6 +639,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         metavar="SECONDS",
         help="the robots are declared SECONDS before they first publish (default 0: all start at once)",
     )
+    parser.add_argument(
+        "--floor-pieces",
+        action="store_true",
+        help="Prometheus also scrapes the floor's text in the exporter's gzip pieces (--prometheus-seconds)",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args(argv)
     try:  # before any server starts: a run refused after minutes of setup measures nothing
@@ -629,6 +669,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.floor,
                 options.page,
                 options.head_start,
+                options.floor_pieces,
             )
     emit(rows)
 

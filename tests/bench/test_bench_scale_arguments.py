@@ -22,6 +22,7 @@ from bench.bench_scale import main
         (["--seconds=0"], "--seconds: must be positive, got 0.0"),
         (["--scrape-interval=0"], "--scrape-interval: must be at least 1 s, got 0"),
         (["--rules"], "--rules: needs --prometheus-seconds"),
+        (["--floor-pieces"], "--floor-pieces: needs --prometheus-seconds"),
         (["--head-start=-0.5"], "--head-start: must be a finite number of seconds, not negative, got -0.5"),
         (["--head-start=nan"], "--head-start: must be a finite number of seconds, not negative, got nan"),
         (["--floor", "--transport=dds"], "--floor: its counting subscriber hears the fleet through"),
