@@ -196,7 +196,7 @@ def scrape_against_floor(
     body = gzip.decompress(gzipped)
     with (
         static_server(body, content_type) as floor,
-        static_server(body, content_type, gzipped) as floor_pieces,
+        static_server(body, content_type, gzipped) if pieces else contextlib.nullcontext("") as floor_pieces,
     ):
         jobs = [("overseer", exporter_url.removeprefix("http://")), ("floor", floor)]
         jobs += [("floor_pieces", floor_pieces)] if pieces else []

@@ -21,19 +21,8 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.api_query import ApiQueryError, parse_component_query
 from overseer.serve.http import OverseerServer
+from support.clock import ManualClock
 from testbed.model_server import serving
-
-
-class ManualClock:
-    """A clock the test moves by hand."""
-
-    def __init__(self) -> None:
-        """Start at an arbitrary unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
 
 
 def array(*statuses: tuple[int, str, str, str]) -> DiagnosticArray:

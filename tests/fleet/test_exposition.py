@@ -17,21 +17,9 @@ from overseer.fleet.message_labels import MessageLabels
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
+from support.clock import ManualClock
 from support.examples import examples
 from support.rendering import FORMATS, Rendering
-
-
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        """Start at a fixed unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
-
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,", "tab\there", "", "\ufffd"]
 # Status messages go into a label too: besides the hostile names, a lone surrogate (not encodable as
@@ -39,8 +27,8 @@ HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,
 HOSTILE_MESSAGES = [*HOSTILE, "lone \ud800 surrogate", "x" * 98 + "🤖☃" + "y" * 50, '\\"\n' * 60]
 
 
-def fleet() -> tuple[FleetModel, Clock]:
-    clock = Clock()
+def fleet() -> tuple[FleetModel, ManualClock]:
+    clock = ManualClock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
     for index, name in enumerate(HOSTILE):
         statuses = (
@@ -299,7 +287,7 @@ _steps = st.one_of(
 def test_cached_exposition_equals_the_oracle_in_both_formats_through_any_changes(
     steps: list[tuple[object, ...]], messages: MessageLabels, external_url: str | None
 ) -> None:
-    clock = Clock()
+    clock = ManualClock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
     rendering = Rendering(model, messages=messages, external_url=external_url)
     for step in steps:

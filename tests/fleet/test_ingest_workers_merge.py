@@ -34,6 +34,7 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.model.shard import Shard
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
+from support.clock import ManualClock
 from support.examples import examples
 from support.oracle import parse_openmetrics
 from support.strategies import arrays
@@ -42,24 +43,12 @@ HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,
 LIMITS = FleetLimits(stale_after=5, robot_timeout=10, expire_after=60, max_components_per_robot=6)
 
 
-class Clock:
-    """A hand-moved clock shared by every model of a test."""
-
-    def __init__(self) -> None:
-        """Start at a fixed unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
-
-
 class SplitFleet:
     """One model holding the whole fleet, and `workers` models each holding the robots it owns."""
 
     def __init__(self, workers: int, shard: Shard | None = None) -> None:
         """Empty models on one clock."""
-        self.clock = Clock()
+        self.clock = ManualClock()
         self.shard = shard or Shard()
         self.whole = FleetModel(LIMITS, self.clock)
         self.owners = [self.shard.for_worker(index, workers) for index in range(workers)]

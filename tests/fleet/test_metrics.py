@@ -14,6 +14,7 @@ from overseer.levels import Level
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import Expectation, FleetLimits, FleetModel, Inventory, ListedRobot
 from overseer.serve.exposition_formats import OPENMETRICS
+from support.clock import ManualClock
 from support.oracle import parse_openmetrics
 from support.paths import GOLDEN
 from support.rendering import Rendering
@@ -33,25 +34,13 @@ CONTRACT = {
 }
 
 
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        """Start at a fixed unix time so the exposition is reproducible."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
-
-
 def fleet_rendering(
     statuses: dict[str, list[DiagnosticStatus]],
     value_keys: str = ".*",
     messages: MessageLabels = DEFAULT_MESSAGE_LABELS,
     external_url: str | None = None,
-) -> tuple[Rendering, FleetModel, Clock]:
-    clock = Clock()
+) -> tuple[Rendering, FleetModel, ManualClock]:
+    clock = ManualClock()
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, expire_after=60), clock=clock)
     for second in range(2):  # twice, a second apart: every robot's period is known
         clock.now += second

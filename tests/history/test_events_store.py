@@ -32,6 +32,7 @@ from overseer.history.store import (
 )
 from overseer.levels import Level
 from overseer.model.events import Event, EventRow, event_of_row, event_rows
+from support.clock import ManualClock
 
 DAY = 86400.0
 HOSTILE = [
@@ -43,18 +44,6 @@ HOSTILE = [
     "nul\x00byte",
     "",
 ]
-
-
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        """Start at a fixed unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
 
 
 def settings(path: Path, retention: float = 30 * DAY, max_size: int = 10**9, **extra: int) -> StoreSettings:
@@ -278,7 +267,7 @@ def test_rows_sent_through_a_pipe_are_stored_as_the_events_they_came_from(tmp_pa
 
 
 def test_events_survive_a_restart_and_ids_keep_growing_after_pruning(tmp_path: Path) -> None:
-    clock = Clock()
+    clock = ManualClock()
     path = tmp_path / "events.db"
     store = EventStore(settings(path, retention=DAY), clock=clock)
     store.add([level_event(clock.now - 2 * DAY), level_event(clock.now - 1)])
@@ -294,7 +283,7 @@ def test_events_survive_a_restart_and_ids_keep_growing_after_pruning(tmp_path: P
 
 
 def test_retention_drops_old_events_at_start_and_on_prune(tmp_path: Path) -> None:
-    clock = Clock()
+    clock = ManualClock()
     path = tmp_path / "events.db"
     store = EventStore(settings(path, retention=DAY), clock=clock)
     store.add([level_event(clock.now - 3 * DAY + i * DAY) for i in range(4)])

@@ -17,18 +17,14 @@ from overseer.maintenance.schedule import MaintenanceSchedule, WindowError
 from overseer.maintenance.store import StoreUnavailable, WindowStore
 from overseer.model.events import Event
 from overseer.model.maintenance import RobotSelector
+from support.clock import ManualClock
 
 BERLIN = ZoneInfo("Europe/Berlin")
 
 
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self, at: datetime.datetime) -> None:
-        self.now = at.timestamp()
-
-    def __call__(self) -> float:
-        return self.now
+def clock_at(moment: datetime.datetime) -> ManualClock:
+    """A hand-moved clock set to `moment`."""
+    return ManualClock(moment.timestamp())
 
 
 def local(text: str) -> float:
@@ -75,7 +71,7 @@ def test_a_robot_selector_refuses_what_no_robot_is_named(text: object) -> None:
 
 
 def test_a_nightly_window_runs_past_midnight_in_its_time_zone(tmp_path: Path) -> None:
-    clock = Clock(datetime.datetime(2026, 11, 23, 23, 0, tzinfo=BERLIN))
+    clock = clock_at(datetime.datetime(2026, 11, 23, 23, 0, tzinfo=BERLIN))
     schedule = MaintenanceSchedule(config(tmp_path, NIGHTS), None, clock=clock)
     [window] = schedule.active(clock.now)
     assert (window.start, window.until) == (local("2026-11-23 22:00"), local("2026-11-24 06:00"))
@@ -88,7 +84,7 @@ def test_a_nightly_window_runs_past_midnight_in_its_time_zone(tmp_path: Path) ->
 
 
 def test_a_night_across_the_spring_clock_change_is_an_hour_shorter(tmp_path: Path) -> None:
-    clock = Clock(
+    clock = clock_at(
         datetime.datetime(2027, 3, 27, 23, 0, tzinfo=BERLIN)
     )  # clocks go forward at 02:00 on the 28th
     [window] = MaintenanceSchedule(config(tmp_path, NIGHTS), None, clock=clock).active(clock.now)
@@ -136,7 +132,7 @@ def test_a_bad_recurring_window_is_one_error_naming_it(tmp_path: Path, window: s
 
 
 def test_open_and_end_a_window_tell_the_history_with_author_and_comment(tmp_path: Path) -> None:
-    clock = Clock(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
+    clock = clock_at(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
     events: list[Event] = []
     schedule = MaintenanceSchedule(MaintenanceConfig(), None, events.extend, clock)
     window = schedule.open(RobotSelector.parse("robot3"), None, clock.now + 7200, " battery swap ", "alice")
@@ -156,7 +152,7 @@ def test_open_and_end_a_window_tell_the_history_with_author_and_comment(tmp_path
 
 
 def test_a_window_that_starts_later_is_told_when_it_starts(tmp_path: Path) -> None:
-    clock = Clock(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
+    clock = clock_at(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
     events: list[Event] = []
     schedule = MaintenanceSchedule(MaintenanceConfig(), None, events.extend, clock)
     schedule.open(RobotSelector.parse("site_b/"), clock.now + 3600, clock.now + 7200, "shift change", "ops")
@@ -183,7 +179,7 @@ def test_a_window_that_starts_later_is_told_when_it_starts(tmp_path: Path) -> No
 def test_a_window_that_makes_no_sense_is_refused_naming_the_field(
     start: float | None, end: float, comment: str, message: str
 ) -> None:
-    clock = Clock(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
+    clock = clock_at(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
     schedule = MaintenanceSchedule(MaintenanceConfig(), None, clock=clock)
     with pytest.raises(WindowError, match=message):
         schedule.open(
@@ -197,7 +193,7 @@ def test_a_window_that_makes_no_sense_is_refused_naming_the_field(
 
 def test_windows_and_their_effects_survive_a_restart_in_the_database(tmp_path: Path) -> None:
     path = str(tmp_path / "overseer-events.db")
-    clock = Clock(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
+    clock = clock_at(datetime.datetime(2026, 11, 23, 10, 0, tzinfo=datetime.timezone.utc))
     first = MaintenanceSchedule(MaintenanceConfig(), WindowStore(path), clock=clock)
     kept = first.open(RobotSelector.parse("robot1"), None, clock.now + 3600, "repair", "alice")
     ended = first.open(RobotSelector.parse("robot2"), None, clock.now + 3600, "swap", "alice")

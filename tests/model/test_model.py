@@ -9,18 +9,7 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.model.expiry import expiry_interval
 from overseer.model.state import StaleOverride
-
-
-class ManualClock:
-    """A clock the test moves by hand (the model's only notion of time)."""
-
-    def __init__(self) -> None:
-        """Start at an arbitrary unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
+from support.clock import ManualClock
 
 
 def array(*statuses: DiagnosticStatus) -> DiagnosticArray:

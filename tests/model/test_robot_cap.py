@@ -15,22 +15,11 @@ from multiprocessing.synchronize import Barrier
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, Inventory, ListedRobot
 from overseer.model.robot_cap import SharedRobotCap
+from support.clock import ManualClock
 
 CONTEXT = multiprocessing.get_context("spawn")  # as the worker pool starts its workers
 RACED_ROBOTS = 5_000  # each process tries to take this many
 RACED_CAP = 6_000  # of their 10,000
-
-
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        """Start at a fixed time."""
-        self.now = 1_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
 
 
 def an_array() -> DiagnosticArray:
@@ -38,7 +27,7 @@ def an_array() -> DiagnosticArray:
     return DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/a", "ok", "", ()),))
 
 
-def shared_models(cap: int, workers: int, clock: Clock | None = None) -> list[FleetModel]:
+def shared_models(cap: int, workers: int, clock: ManualClock | None = None) -> list[FleetModel]:
     """`workers` models counting their robots together against `cap`."""
     counts = CONTEXT.RawArray("q", workers)
     limits = FleetLimits(max_robots=cap, expire_after=60)
@@ -59,7 +48,7 @@ def test_robots_all_in_one_worker_fill_the_whole_cap_and_no_more() -> None:
 
 
 def test_a_robot_forgotten_in_one_worker_makes_room_in_another() -> None:
-    clock = Clock()
+    clock = ManualClock(1_000.0)
     first, second = shared_models(2, 2, clock)
     first.apply("r1", an_array(), "dds")
     second.apply("r2", an_array(), "dds")
@@ -83,7 +72,7 @@ def test_a_worker_started_again_counts_its_robots_from_none() -> None:
 
 
 def test_a_retired_or_unlisted_robot_gives_its_place_back() -> None:
-    clock = Clock()
+    clock = ManualClock(1_000.0)
     first, second = shared_models(2, 2, clock)
     first.set_inventory(Inventory({"listed": ListedRobot((), ())}))  # followed, never heard
     first.apply("r1", an_array(), "dds")

@@ -14,21 +14,10 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.model.events import Event
 from overseer.model.fleet import LevelChange
 from overseer.model.transitions import TransitionDetector
+from support.clock import ManualClock
 from support.examples import examples
 
 STALE_AFTER, ROBOT_TIMEOUT, EXPIRE_AFTER = 5.0, 10.0, 60.0
-
-
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        """Start at a fixed unix time."""
-        self.now = 1_700_000_000.0
-
-    def __call__(self) -> float:
-        """The current time."""
-        return self.now
 
 
 class Fleet:
@@ -36,7 +25,7 @@ class Fleet:
 
     def __init__(self) -> None:
         """An empty fleet at a fixed time."""
-        self.clock = Clock()
+        self.clock = ManualClock()
         limits = FleetLimits(stale_after=STALE_AFTER, robot_timeout=ROBOT_TIMEOUT, expire_after=EXPIRE_AFTER)
         self.model = FleetModel(limits, clock=self.clock)
         self.events: list[Event] = []
@@ -103,7 +92,7 @@ def test_a_first_message_makes_its_components_appear_and_its_robot_up() -> None:
 class JitteryWallClock:
     """A wall clock read the given microseconds after the monotonic one, each read in turn."""
 
-    def __init__(self, monotonic: Clock, *late_by_microseconds: float) -> None:
+    def __init__(self, monotonic: ManualClock, *late_by_microseconds: float) -> None:
         """Follow `monotonic` 1,000 s ahead, late by each of `late_by_microseconds` in turn, then by 0."""
         self._monotonic = monotonic
         self._late = list(late_by_microseconds)
@@ -118,7 +107,7 @@ def test_a_robot_up_is_dated_as_the_message_that_brought_it_up_however_the_clock
     # Under load the wall clock may be read a few microseconds after the monotonic one for one message
     # and not for the next: the robot_up event, dated from the run's monotonic start, must not come
     # before the `appeared` of the message that began the run (events are listed by time).
-    monotonic = Clock()
+    monotonic = ManualClock()
     limits = FleetLimits(stale_after=STALE_AFTER, robot_timeout=ROBOT_TIMEOUT, expire_after=EXPIRE_AFTER)
     model = FleetModel(limits, clock=monotonic, wall_clock=JitteryWallClock(monotonic, 40.0))
     sent: list[Event] = []

@@ -5,18 +5,7 @@ from __future__ import annotations
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from overseer.push.icinga2_results import Signatures, robot_signature
-
-
-class Clock:
-    """A monotonic clock the test moves."""
-
-    def __init__(self) -> None:
-        """Start at 100 s."""
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        """The time now."""
-        return self.now
+from support.clock import ManualClock
 
 
 def array(*levels: int) -> DiagnosticArray:
@@ -28,7 +17,7 @@ def array(*levels: int) -> DiagnosticArray:
 
 
 def test_kept_signatures_follow_levels_staleness_down_and_a_robot_followed_again() -> None:
-    clock = Clock()
+    clock = ManualClock(100.0)
     model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, stale_periods=1), clock=clock)
     signatures = Signatures()
     seen = []

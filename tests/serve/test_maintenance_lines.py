@@ -17,21 +17,12 @@ from overseer.model.maintenance import RobotSelector
 from overseer.serve.assembler import ExpositionAssembler
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT, ExpositionFormat
 from overseer.serve.maintenance_lines import MaintenanceLines
+from support.clock import ManualClock
 from support.maintenance_oracle import MaintenanceOracle
 from support.oracle import oracle_openmetrics, oracle_registry, oracle_text
 
 HOSTILE = ['a"b', "back\\slash", "new\nline", "ünï/cøde", "site_a/robot7", ""]
 FORMATS = [TEXT, OPENMETRICS]
-
-
-class Clock:
-    """A hand-moved clock."""
-
-    def __init__(self) -> None:
-        self.now = 1_800_000_000.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 class Fleet:
@@ -55,12 +46,12 @@ def oracle(schedule: MaintenanceSchedule, fleet: Fleet, fmt: ExpositionFormat) -
 
 
 @pytest.fixture
-def clock() -> Clock:
-    return Clock()
+def clock() -> ManualClock:
+    return ManualClock(1_800_000_000.0)
 
 
 @pytest.fixture
-def schedule(clock: Clock) -> MaintenanceSchedule:
+def schedule(clock: ManualClock) -> MaintenanceSchedule:
     return MaintenanceSchedule(MaintenanceConfig(), None, clock=clock)
 
 
@@ -77,7 +68,7 @@ def test_every_robot_out_of_maintenance_is_prometheus_clients_bytes(
 
 @pytest.mark.parametrize("fmt", FORMATS, ids=["text", "openmetrics"])
 def test_robots_in_windows_scheduled_windows_and_their_ends_are_prometheus_clients_bytes(
-    schedule: MaintenanceSchedule, clock: Clock, fmt: ExpositionFormat
+    schedule: MaintenanceSchedule, clock: ManualClock, fmt: ExpositionFormat
 ) -> None:
     fleet = Fleet(["site_a/robot1", "site_a/robot2", "site_b/robot1", 'a"b'])
     schedule.open(RobotSelector.parse("site_a/"), None, clock.now + 3600.25, "swap", "ops")
@@ -128,7 +119,7 @@ def test_an_empty_fleet_has_the_headers_and_the_counts(schedule: MaintenanceSche
 
 
 def test_one_window_ending_as_another_starts_changes_the_lines(
-    schedule: MaintenanceSchedule, clock: Clock
+    schedule: MaintenanceSchedule, clock: ManualClock
 ) -> None:
     fleet = Fleet(["robot1", "robot2"])
     first = schedule.open(RobotSelector.parse("robot1"), None, clock.now + 600, "first", "ops")
@@ -142,7 +133,9 @@ def test_one_window_ending_as_another_starts_changes_the_lines(
     assert after == oracle(schedule, fleet, OPENMETRICS)
 
 
-def test_a_window_that_starts_or_ends_changes_the_lines(schedule: MaintenanceSchedule, clock: Clock) -> None:
+def test_a_window_that_starts_or_ends_changes_the_lines(
+    schedule: MaintenanceSchedule, clock: ManualClock
+) -> None:
     fleet = Fleet(["robot1", "robot2"])
     schedule.open(RobotSelector.parse("robot1"), clock.now + 60, clock.now + 120, "soon", "ops")
     lines = MaintenanceLines(schedule, fleet.robot_names)
@@ -161,7 +154,7 @@ def test_a_window_that_starts_or_ends_changes_the_lines(schedule: MaintenanceSch
 
 @pytest.mark.parametrize("fmt", FORMATS, ids=["text", "openmetrics"])
 def test_the_assembled_exposition_ends_with_them_plain_and_gzipped(
-    schedule: MaintenanceSchedule, clock: Clock, fmt: ExpositionFormat
+    schedule: MaintenanceSchedule, clock: ManualClock, fmt: ExpositionFormat
 ) -> None:
     fleet = Fleet(["robot1", 'hostile"}\n'])
     schedule.open(RobotSelector.parse("robot1"), None, clock.now + 60, "now", "ops")
