@@ -13,7 +13,17 @@ from pathlib import Path
 
 import pytest
 
-from overseer.serve.render_ahead import MARGIN, MAX_SCRAPERS, MIN_PASS, RenderAhead, ScrapeCadence
+from overseer.serve.render_ahead import (
+    FUTILE,
+    FUTILE_IN_A_ROW,
+    MARGIN,
+    MAX_SCRAPERS,
+    MIN_PASS,
+    SKIPPED_AFTER_FUTILE,
+    RenderAhead,
+    RenderAheadCollector,
+    ScrapeCadence,
+)
 from testbed.ports import fresh_domain_id
 from testbed.processes import running_exporter, running_simulator, wait_for
 from testbed.prometheus import running_prometheus
@@ -97,16 +107,22 @@ def test_the_thread_renders_once_shortly_before_each_expected_scrape() -> None:
     assert render_ahead.renders == 1 and render_ahead.failures == 0
 
 
-def slow_renders(seconds: float) -> tuple[list[tuple[float, float]], RenderAhead]:
-    """A render ahead whose every render takes `seconds`, and the (start, end) of each it made."""
+def slow_renders(
+    seconds: float, passes: float | None = None, min_interval: float = 1.0
+) -> tuple[list[tuple[float, float]], RenderAhead]:
+    """A render ahead whose first render takes `seconds` and the others `passes`; the (start, end) of each.
+
+    The passes take two thirds of the first by default: they converge.
+    """
     renders: list[tuple[float, float]] = []
+    pass_seconds = 2 * seconds / 3 if passes is None else passes
 
     def render() -> None:
         started = time.monotonic()
-        time.sleep(seconds)
+        time.sleep(pass_seconds if renders else seconds)
         renders.append((started, time.monotonic()))
 
-    return renders, RenderAhead(render, min_interval=1.0)
+    return renders, RenderAhead(render, min_interval=min_interval)
 
 
 def scrape_three_times(render_ahead: RenderAhead, started: float) -> float:
@@ -134,17 +150,18 @@ def test_a_long_render_is_followed_by_passes_until_the_scrape_begins() -> None:
         render_ahead.stop()
     # The first begins half a second before 4.5 s; then pass after pass, each of what changed during the
     # one before, the last ending within half a pass of the scrape: it renders the last moments' changes.
-    assert render_ahead.renders == 1 and render_ahead.failures == 0
+    assert render_ahead.renders == 1 and render_ahead.failures == 0 and render_ahead.skipped == 0
     assert render_ahead.passes == len(renders) - 1 >= 2
     assert renders[0][0] - started >= 4.5 - MARGIN - 0.05
-    assert scraped - 0.06 - 0.05 <= renders[-1][1] <= scraped + 0.06 + 0.05
+    assert scraped - 0.04 - 0.05 <= renders[-1][1] <= scraped + 0.04 + 0.05
     assert render_ahead.last_seconds == pytest.approx(0.12, abs=0.05)  # the first pass's
 
 
-def passes_toward(due: float, seconds: float) -> list[float]:
-    """When each pass after a render ahead began, every render taking `seconds` on a clock moved by hand.
+def passes_toward(due: float, seconds: float, ahead: float | None = None) -> tuple[list[float], bool]:
+    """When each pass after a render ahead began (every one `seconds` on a hand clock), and whether futile.
 
-    The render ahead ended at 0; the scrape is `due` and does not begin meanwhile.
+    The render ahead took `ahead` (by default twice a pass) and ended at 0; the scrape is `due` and does
+    not begin meanwhile.
     """
     now = [0.0]
     began: list[float] = []
@@ -153,22 +170,57 @@ def passes_toward(due: float, seconds: float) -> list[float]:
         began.append(now[0])
         now[0] += seconds
 
-    RenderAhead(render, clock=lambda: now[0])._render_until_scraped(seconds, 0, due)
-    return began
+    render_ahead = RenderAhead(render, clock=lambda: now[0])
+    futile = render_ahead._render_until_scraped(2 * seconds if ahead is None else ahead, 0, due)
+    return began, futile
 
 
 def test_a_pass_that_would_end_within_half_its_length_after_the_scrape_is_begun() -> None:
     # The second pass, from 0.29 s, ends at 0.58 s: 0.08 s after the scrape, within 0.145 s.
-    assert passes_toward(0.5, 0.29) == [0.0, 0.29]
+    assert passes_toward(0.5, 0.29) == ([0.0, 0.29], False)
     # Passes of 0.2 s toward a scrape at 1 s: the last, from 0.8 s, ends at it; one from 1 s would not.
-    assert passes_toward(1.0, 0.2) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8])
+    began, futile = passes_toward(1.0, 0.2)
+    assert began == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8]) and not futile
 
 
 def test_a_pass_that_would_keep_the_scrape_waiting_longer_is_not_begun() -> None:
     # A third pass, from 0.48 s, would end at 0.72 s, 0.22 s after the scrape: the scrape renders what
     # it would have, without waiting for it.
-    assert passes_toward(0.5, 0.24) == [0.0, 0.24]
-    assert passes_toward(0.1, 0.3) == []  # the scrape is nearer than half a pass
+    assert passes_toward(0.5, 0.24) == ([0.0, 0.24], False)
+    assert passes_toward(0.1, 0.3) == ([], False)  # the scrape is nearer than half a pass
+
+
+def test_a_pass_nearly_as_long_as_its_render_ahead_ends_the_passes() -> None:
+    # Nearly all the render ahead rendered changed again during the pass: so it will before the scrape.
+    assert passes_toward(1.0, FUTILE * 0.2, ahead=0.2) == ([0.0], True)
+    assert passes_toward(1.0, 0.25, ahead=0.2) == ([0.0], True)
+    # A pass a little shorter still converges: the passes go on toward the scrape.
+    began, futile = passes_toward(1.0, 0.8 * 0.2, ahead=0.2)
+    assert len(began) == 6 and not futile
+
+
+def test_after_two_futile_render_aheads_the_next_scrapes_are_not_rendered_ahead_of_then_one_is() -> None:
+    # Every render as long as the first: each pass renders again all that the render ahead did.
+    renders, render_ahead = slow_renders(0.1, passes=0.1, min_interval=0.5)
+    render_ahead.start()
+    interval = 0.8
+    try:
+        started = time.monotonic()
+        # Learned at the third scrape (1.6 s); rendered ahead of the fourth and fifth (2.4 and 3.2 s), a
+        # futile pass after each; the next three (4.0, 4.8 and 5.6 s) skipped; rendered ahead of the ninth
+        # (6.4 s) again, futile again.
+        for scrape in range(FUTILE_IN_A_ROW + SKIPPED_AFTER_FUTILE + 3):
+            time.sleep(max(0.0, started + interval * scrape - time.monotonic()))
+            render_ahead.scraped(PROMETHEUS)
+        time.sleep(max(0.0, started + 6.35 - time.monotonic()))
+    finally:
+        render_ahead.stop()
+    assert render_ahead.skipped == SKIPPED_AFTER_FUTILE
+    assert render_ahead.renders == 3 and render_ahead.passes == 3 and render_ahead.failures == 0
+    assert [round(began - started, 1) for began, _ in renders] == [2.0, 2.1, 2.8, 2.9, 6.0, 6.1]
+    family = next(iter(RenderAheadCollector(render_ahead).collect()))
+    counts = {sample.labels["result"]: sample.value for sample in family.samples}
+    assert counts == {"done": 3.0, "failed": 0.0, "skipped": float(SKIPPED_AFTER_FUTILE)}
 
 
 def test_passes_stop_about_when_a_scrape_that_does_not_come_was_due() -> None:
@@ -241,7 +293,7 @@ def test_prometheus_scrapes_are_learned_and_the_workers_render_ahead_of_them(tmp
 
             # Learned at the third scrape (10 s), rendered before the fourth, seen by the fifth.
             counts = wait_for(lambda: (c := renders_ahead()).get("done", 0) >= 2 and c, 60, 1.0)
-            assert counts["failed"] == 0
+            assert counts["failed"] == 0 and counts["skipped"] == 0
             seconds = prometheus.query("overseer_exposition_render_ahead_seconds")
             assert 0 < float(seconds[0]["value"][1]) < 4
             # Each scrape's own wait for the series, as Prometheus stored it beside its scrape duration.

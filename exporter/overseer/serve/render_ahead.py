@@ -15,6 +15,14 @@ pass is shorter than the one before, and the scrape waits for the last moments' 
 that begins during a pass waits for it, and then renders what changed meanwhile; so a pass that would
 end later than half its length after the scrape is due is not begun (the scrape renders what it would
 have, and waits less): the passes stop at the scrape, or about when it was due.
+
+When statuses change faster than a render takes (every robot several times a second, or live values), a
+pass renders nearly all the render ahead did: whatever it renders changes again before the scrape, which
+renders it all once more. Such a pass (`FUTILE`) ends the passes. After two render aheads in a row whose
+pass was futile (one could be a pass slowed by a busy machine), the next few scrapes are not rendered
+ahead of (`SKIPPED_AFTER_FUTILE`): those renders would only take the cores the ingest and the scraper
+need. Then a render ahead tries again, in case the fleet calmed down; futile once more, the scrapes after
+it are skipped again.
 """
 
 from __future__ import annotations
@@ -36,6 +44,9 @@ LEAD = 2.0  # how many times as long as the last render ahead took the next begi
 MARGIN = 0.5  # seconds the render ahead begins before the scrape, beyond LEAD times the last one's
 MIN_PASS = 0.05  # seconds: a render quicker leaves the scrape no more than that, so no pass after it
 MAX_SCRAPERS = 16  # scrapers followed at once (a client that scrapes once is forgotten first)
+FUTILE = 0.9  # a pass this long against its render ahead rendered nearly all it did again: no gain
+FUTILE_IN_A_ROW = 2  # render aheads in a row with a futile pass before scrapes are skipped
+SKIPPED_AFTER_FUTILE = 3  # expected scrapes then not rendered ahead of, before trying again
 
 
 @dataclass
@@ -105,8 +116,11 @@ class RenderAhead:
         self.renders = 0  # renders ahead done
         self.passes = 0  # renders again after them, of what changed during the render before
         self.failures = 0  # renders ahead that raised (a worker restarting)
+        self.skipped = 0  # expected scrapes not rendered ahead of: the last render ahead's pass was futile
         self.last_seconds = 0.0  # how long the last render ahead took (its first pass)
         self._scrapes = 0  # scrapes begun
+        self._futile_in_a_row = 0  # render aheads, each with a futile pass, since the last that was not
+        self._to_skip = 0  # expected scrapes still to skip
 
     def scraped(self, scraper: str) -> None:
         """`scraper` began a scrape now."""
@@ -145,17 +159,27 @@ class RenderAhead:
             if begin > now:
                 self._sleep(begin - now)
                 continue
+            rendered_for = due
+            if self._to_skip:
+                self._to_skip -= 1
+                self.skipped += 1
+                continue
             with self._lock:
                 scrapes = self._scrapes
             seconds = self._render()
             if seconds is not None:
                 self.last_seconds = seconds
                 self.renders += 1
-                self._render_until_scraped(seconds, scrapes, due)
-            rendered_for = due
+                futile = self._render_until_scraped(seconds, scrapes, due)
+                self._futile_in_a_row = self._futile_in_a_row + 1 if futile else 0
+                if self._futile_in_a_row >= FUTILE_IN_A_ROW:
+                    self._to_skip = SKIPPED_AFTER_FUTILE
 
-    def _render_until_scraped(self, seconds: float, scrapes: int, due: float) -> None:
+    def _render_until_scraped(self, seconds: float, scrapes: int, due: float) -> bool:
         """Render again what changed during the render before, until a scrape begins or it is `due`.
+
+        True when a pass was futile: it took `FUTILE` times as long as the render ahead (`seconds`) or
+        longer, and no more are begun.
 
         A pass is expected to take as long as the one before (`seconds`); it is not begun when it would
         end more than half of that after `due`. A scrape beginning at `due` would wait for the rest of the
@@ -163,15 +187,20 @@ class RenderAhead:
         changed during the one before and since: less, once the pass would run past half its length (for
         passes as long as the one before; shorter ones would pay off a little later).
         """
+        ahead = seconds
         while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() + seconds / 2 <= due:
             with self._lock:
                 if self._scrapes != scrapes:
-                    return
+                    return False
             passed = self._render()
             if passed is None:
-                return
+                return False
             self.passes += 1
+            if passed >= FUTILE * ahead:
+                log.debug("a pass took %.3f s after a render ahead of %.3f s: no gain", passed, ahead)
+                return True
             seconds = passed
+        return False
 
     def _sleep(self, seconds: float | None) -> None:
         """Until `seconds` have passed, a scrape began, or the thread is stopped."""
@@ -201,11 +230,13 @@ class RenderAheadCollector(Collector):
         """The families, read now."""
         renders = CounterMetricFamily(
             "overseer_exposition_renders_ahead",
-            "Renders of the fleet's series shortly before an expected scrape (result: done, failed).",
+            "Renders of the fleet's series shortly before an expected scrape "
+            "(result: done, failed, skipped after a futile pass).",
             labels=["result"],
         )
         renders.add_metric(["done"], float(self._render_ahead.renders))
         renders.add_metric(["failed"], float(self._render_ahead.failures))
+        renders.add_metric(["skipped"], float(self._render_ahead.skipped))
         passes = CounterMetricFamily(
             "overseer_exposition_render_ahead_passes",
             "Renders again between a render ahead and its scrape, each of what changed during the last.",
