@@ -99,6 +99,7 @@ class Counts(NamedTuple):
     events_dropped: float
     renders_ahead: float  # of the series, shortly before a scrape expected (metrics.render_ahead)
     render_ahead_passes: float  # renders again after them, until the scrape began
+    render_ahead_skipped: float  # expected scrapes not rendered ahead of, after futile passes
     render_ahead_seconds: float  # how long the last took
     over_cap: float  # statuses dropped because their robot was beyond fleet.max_robots
 
@@ -122,6 +123,7 @@ def counted(url: str, transport: str) -> Counts:
         total(r"overseer_events_dropped_total\{reason=\"[a-z_]+\"\}"),
         total(r'overseer_exposition_renders_ahead_total\{result="done"\}'),
         total("overseer_exposition_render_ahead_passes_total"),
+        total(r'overseer_exposition_renders_ahead_total\{result="skipped"\}'),
         total("overseer_exposition_render_ahead_seconds"),
         total(r'overseer_statuses_dropped_total\{reason="robot_limit"\}'),
     )
@@ -557,6 +559,12 @@ def run(
                     f"{label}: renders again after them, until the scrape",
                     counts.render_ahead_passes,
                     "passes",
+                ),
+                Row(
+                    "scale",
+                    f"{label}: scrapes not rendered ahead of, after futile passes",
+                    counts.render_ahead_skipped,
+                    "scrapes",
                 ),
                 Row("scale", f"{label}: the last render ahead took", counts.render_ahead_seconds, "s"),
             ]
