@@ -19,10 +19,10 @@ have, and waits less): the passes stop at the scrape, or about when it was due.
 When statuses change faster than a render takes (every robot several times a second, or live values), a
 pass renders nearly all the render ahead did: whatever it renders changes again before the scrape, which
 renders it all once more. Such a pass (`FUTILE`) ends the passes. After two render aheads in a row whose
-pass was futile (one could be a pass slowed by a busy machine), the next few scrapes are not rendered
-ahead of (`SKIPPED_AFTER_FUTILE`): those renders would only take the cores the ingest and the scraper
-need. Then a render ahead tries again, in case the fleet calmed down; futile once more, the scrapes after
-it are skipped again.
+pass was futile (one could be a pass slowed by a busy machine), the scrapes of the next few intervals are
+not rendered ahead of (`SKIPPED_AFTER_FUTILE`): those renders would only take the cores the ingest and
+the scraper need. Then a render ahead tries again, in case the fleet calmed down; futile once more, the
+scrapes after it are skipped again.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ MIN_PASS = 0.05  # seconds: a render quicker leaves the scrape no more than that
 MAX_SCRAPERS = 16  # scrapers followed at once (a client that scrapes once is forgotten first)
 FUTILE = 0.9  # a pass this long against its render ahead rendered nearly all it did again: no gain
 FUTILE_IN_A_ROW = 2  # render aheads in a row with a futile pass before scrapes are skipped
-SKIPPED_AFTER_FUTILE = 3  # expected scrapes then not rendered ahead of, before trying again
+SKIPPED_AFTER_FUTILE = 3  # intervals whose scrapes are then not rendered ahead of, before trying again
 
 
 @dataclass
@@ -116,11 +116,11 @@ class RenderAhead:
         self.renders = 0  # renders ahead done
         self.passes = 0  # renders again after them, of what changed during the render before
         self.failures = 0  # renders ahead that raised (a worker restarting)
-        self.skipped = 0  # expected scrapes not rendered ahead of: the last render ahead's pass was futile
+        self.skipped = 0  # expected scrapes not rendered ahead of, after render aheads with futile passes
         self.last_seconds = 0.0  # how long the last render ahead took (its first pass)
         self._scrapes = 0  # scrapes begun
-        self._futile_in_a_row = 0  # render aheads, each with a futile pass, since the last that was not
-        self._to_skip = 0  # expected scrapes still to skip
+        self._futile_in_a_row = 0  # render aheads, each with a futile pass, since one whose passes were not
+        self._skip_until = float("-inf")  # scrapes expected before then are not rendered ahead of
 
     def scraped(self, scraper: str) -> None:
         """`scraper` began a scrape now."""
@@ -160,8 +160,7 @@ class RenderAhead:
                 self._sleep(begin - now)
                 continue
             rendered_for = due
-            if self._to_skip:
-                self._to_skip -= 1
+            if due < self._skip_until:
                 self.skipped += 1
                 continue
             with self._lock:
@@ -171,15 +170,17 @@ class RenderAhead:
                 self.last_seconds = seconds
                 self.renders += 1
                 futile = self._render_until_scraped(seconds, scrapes, due)
-                self._futile_in_a_row = self._futile_in_a_row + 1 if futile else 0
-                if self._futile_in_a_row >= FUTILE_IN_A_ROW:
-                    self._to_skip = SKIPPED_AFTER_FUTILE
+                if futile is not None:
+                    self._futile_in_a_row = self._futile_in_a_row + 1 if futile else 0
+                if futile and self._futile_in_a_row >= FUTILE_IN_A_ROW:
+                    # Whichever scrapers make them: a time, so that a scraper that stops leaves none behind.
+                    self._skip_until = due + (SKIPPED_AFTER_FUTILE + 0.5) * interval
 
-    def _render_until_scraped(self, seconds: float, scrapes: int, due: float) -> bool:
+    def _render_until_scraped(self, seconds: float, scrapes: int, due: float) -> bool | None:
         """Render again what changed during the render before, until a scrape begins or it is `due`.
 
         True when a pass was futile: it took `FUTILE` times as long as the render ahead (`seconds`) or
-        longer, and no more are begun.
+        longer, and no more are begun; False when passes were made and none was; None when none was made.
 
         A pass is expected to take as long as the one before (`seconds`); it is not begun when it would
         end more than half of that after `due`. A scrape beginning at `due` would wait for the rest of the
@@ -187,20 +188,20 @@ class RenderAhead:
         changed during the one before and since: less, once the pass would run past half its length (for
         passes as long as the one before; shorter ones would pay off a little later).
         """
-        ahead = seconds
+        ahead, passes_before = seconds, self.passes
         while seconds >= MIN_PASS and not self._stopping.is_set() and self._clock() + seconds / 2 <= due:
             with self._lock:
                 if self._scrapes != scrapes:
-                    return False
+                    break
             passed = self._render()
             if passed is None:
-                return False
+                break
             self.passes += 1
             if passed >= FUTILE * ahead:
                 log.debug("a pass took %.3f s after a render ahead of %.3f s: no gain", passed, ahead)
                 return True
             seconds = passed
-        return False
+        return None if self.passes == passes_before else False
 
     def _sleep(self, seconds: float | None) -> None:
         """Until `seconds` have passed, a scrape began, or the thread is stopped."""
@@ -230,8 +231,8 @@ class RenderAheadCollector(Collector):
         """The families, read now."""
         renders = CounterMetricFamily(
             "overseer_exposition_renders_ahead",
-            "Renders of the fleet's series shortly before an expected scrape "
-            "(result: done, failed, skipped after a futile pass).",
+            "Renders of the fleet's series shortly before an expected scrape (result: done, failed), "
+            "and expected scrapes not rendered ahead of after render aheads with futile passes (skipped).",
             labels=["result"],
         )
         renders.add_metric(["done"], float(self._render_ahead.renders))
