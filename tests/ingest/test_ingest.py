@@ -18,6 +18,7 @@ from overseer.codec.wire import ArrayHead, WireFormat, decode_array, decode_laid
 from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, FleetSnapshot
+from support.clock import ManualClock
 from support.codec_paths import CODEC_PATHS, codec_path
 from support.examples import examples
 
@@ -165,11 +166,11 @@ def test_a_payload_cut_inside_a_changed_status_is_counted_and_applies_nothing() 
 
 
 def test_repeat_after_the_robot_was_forgotten_is_applied_again() -> None:
-    now = [1_700_000_000.0]
-    model = FleetModel(FleetLimits(expire_after=60), clock=lambda: now[0])
+    clock = ManualClock()
+    model = FleetModel(FleetLimits(expire_after=60), clock=clock)
     ingest = PayloadIngest(model, "r1", "dds", "t", cdr.WIRE_FORMAT)
     ingest(cdr_payload(1, DiagnosticStatus(0, "/a", "m", "")))
-    now[0] += 61
+    clock.now += 61
     assert model.expire() == ["r1"]
     ingest(cdr_payload(2, DiagnosticStatus(0, "/a", "m", "")))
     assert [r.name for r in model.snapshot().robots] == ["r1"]
@@ -274,21 +275,21 @@ def test_ingest_agrees_with_decoding_and_applying_every_payload(
     encoding: str, sequence: list[tuple[list[tuple[DiagnosticStatus, ...]], bool]]
 ) -> None:
     wire, encode = _ENCODERS[encoding]
-    now = [1_700_000_000.0]
+    clock = ManualClock()
     limits = FleetLimits(max_components_per_robot=4, max_values_per_component=2, max_string_length=20)
-    fast = FleetModel(limits, clock=lambda: now[0])
-    plain = FleetModel(limits, clock=lambda: now[0])
+    fast = FleetModel(limits, clock=clock)
+    plain = FleetModel(limits, clock=clock)
     ingest = PayloadIngest(fast, "r1", "dds", "t", wire)
     stamp = 0
     for arrays, forget in sequence:
         for items in arrays:
             stamp += 1
-            now[0] += 1.0
+            clock.now += 1.0
             payload = encode(DiagnosticArray(stamp, stamp, "", items))
             ingest(payload)
             plain.apply("r1", reference_decode(wire, payload), "dds", "t")
             stamp += 1
-            now[0] += 1.0
+            clock.now += 1.0
             ingest(encode(DiagnosticArray(stamp, stamp, "", items)))  # republished with a new stamp
             plain.apply("r1", reference_decode(wire, payload), "dds", "t")
         if forget:

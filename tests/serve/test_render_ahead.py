@@ -24,6 +24,7 @@ from overseer.serve.render_ahead import (
     RenderAheadCollector,
     ScrapeCadence,
 )
+from support.clock import ManualClock
 from testbed.ports import fresh_domain_id
 from testbed.processes import running_exporter, running_simulator, wait_for
 from testbed.prometheus import running_prometheus
@@ -163,14 +164,14 @@ def passes_toward(due: float, seconds: float, ahead: float | None = None) -> tup
     The render ahead took `ahead` (by default twice a pass) and ended at 0; the scrape is `due` and does
     not begin meanwhile.
     """
-    now = [0.0]
+    clock = ManualClock(0.0)
     began: list[float] = []
 
     def render() -> None:
-        began.append(now[0])
-        now[0] += seconds
+        began.append(clock.now)
+        clock.now += seconds
 
-    render_ahead = RenderAhead(render, clock=lambda: now[0])
+    render_ahead = RenderAhead(render, clock=clock)
     futile = render_ahead._render_until_scraped(2 * seconds if ahead is None else ahead, 0, due)
     return began, futile
 
@@ -211,29 +212,31 @@ class HandClockRenderAhead(RenderAhead):
         self, scrapes: list[float], ahead: float, passes: float | Callable[[int], float], until: float
     ) -> None:
         """Scrapes at `scrapes` (seconds, in order), renders of `ahead` then `passes` seconds."""
-        self.now = 0.0
+        self.clock = ManualClock(0.0)
         self.began: list[float] = []  # when each render began
         self._pending = list(scrapes)
         self._ahead = ahead
         self._passes = passes if callable(passes) else lambda _: passes
         self._until = until
         self._last_end = float("-inf")
-        super().__init__(self._render_for_a_while, min_interval=0.5, clock=lambda: self.now)
+        super().__init__(self._render_for_a_while, min_interval=0.5, clock=self.clock)
 
     def _render_for_a_while(self) -> None:
         # A render that begins as the one before ended is a pass.
-        self.began.append(self.now)
-        self.now += self._passes(self.renders) if self.now == self._last_end else self._ahead
-        self._last_end = self.now
+        clock = self.clock
+        self.began.append(clock.now)
+        clock.now += self._passes(self.renders) if clock.now == self._last_end else self._ahead
+        self._last_end = clock.now
 
     def _sleep(self, seconds: float | None) -> None:
-        wake = self.now + seconds if seconds is not None else float("inf")
+        clock = self.clock
+        wake = clock.now + seconds if seconds is not None else float("inf")
         if self._pending and self._pending[0] <= wake:
-            self.now = max(self.now, self._pending.pop(0))
+            clock.now = max(clock.now, self._pending.pop(0))
             self.scraped(PROMETHEUS)
         else:
-            self.now = wake
-        if self.now > self._until:
+            clock.now = wake
+        if clock.now > self._until:
             self._stopping.set()
 
 
