@@ -21,6 +21,36 @@ enum layout { CDR_LE = 0, CDR_BE = 1, ROS1 = 2 };
 static PyTypeObject *status_type = NULL; /* overseer.messages.DiagnosticStatus */
 static PyObject *decode_error = NULL;    /* overseer.codec.errors.DecodeError */
 
+/* The key-value pairs and the values tuples decoded before, each kept once: robots of one fleet report
+ * the same values (a camera's 30.0 fps, a motor's "Running") and keep them for hours, and a pair with
+ * its text costs more than the component that holds it. A table that reaches SHARED_LIMIT entries
+ * starts again empty, so that a fleet of ever-new values holds at most that many it no longer uses.
+ *
+ * Looking up a value no one else reported costs about as much as decoding it, and some values are
+ * measurements that never repeat. So each pair's key (each values tuple's status name) has a record of
+ * how often its lookups found an equal: one that found one for fewer than one in SHARED_WORTH of a
+ * window's lookups rests (shares nothing) for the next SHARED_REST items, then tries again. Records are
+ * slots picked by the address of the key or name, which the decoder interns: two that share a slot
+ * share a record, which costs at most some sharing, never a wrong value. */
+#define SHARED_LIMIT 16384
+#define SHARED_WINDOW 64
+#define SHARED_WORTH 4
+#define SHARED_REST (16 * SHARED_WINDOW)
+#define SHARED_SLOTS 1024
+
+struct sharing {
+    uint16_t lookups, found; /* in this window */
+    uint16_t resting;        /* items left to pass unshared */
+};
+
+struct shared_table {
+    PyObject *kept; /* a dict of each item kept to itself */
+    struct sharing slots[SHARED_SLOTS];
+};
+
+static struct shared_table shared_pairs;  /* slots by key */
+static struct shared_table shared_values; /* slots by status name */
+
 struct reader {
     const unsigned char *data;
     Py_ssize_t end; /* reading stops here (never past the buffer) */
@@ -86,6 +116,35 @@ static PyObject *new_status(PyObject *fields[5]) {
     return status;
 }
 
+/* `item`, or an equal one the table kept before (a new reference either way); steals `item`.
+ * `by` (the key or name, interned) picks the record of how often sharing found an equal. */
+static PyObject *shared(struct shared_table *table, PyObject *by, PyObject *item) {
+    uintptr_t address = (uintptr_t)by;
+    struct sharing *record = &table->slots[((address >> 4) ^ (address >> 14)) & (SHARED_SLOTS - 1)];
+    if (record->resting > 0) {
+        record->resting--;
+        return item;
+    }
+    if (PyDict_GET_SIZE(table->kept) >= SHARED_LIMIT) {
+        PyDict_Clear(table->kept);
+    }
+    PyObject *kept = PyDict_SetDefault(table->kept, item, item);
+    if (kept == NULL) {
+        Py_DECREF(item);
+        return NULL;
+    }
+    Py_INCREF(kept);
+    Py_DECREF(item);
+    record->found += kept != item;
+    if (++record->lookups == SHARED_WINDOW) {
+        if (record->found * SHARED_WORTH < SHARED_WINDOW) {
+            record->resting = SHARED_REST;
+        }
+        record->lookups = record->found = 0;
+    }
+    return kept;
+}
+
 /* The status at *at; moves *at past it. NULL with an exception set when malformed. */
 static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
     Py_ssize_t pos = *at;
@@ -135,7 +194,7 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
         if (key == NULL) {
             goto fail;
         }
-        PyUnicode_InternInPlace(&key); /* keys repeat too; values (measurements) mostly do not */
+        PyUnicode_InternInPlace(&key); /* keys repeat too; a value is shared with its key below */
         PyObject *value = read_string(r, &pos);
         if (value == NULL) {
             Py_DECREF(key);
@@ -149,7 +208,17 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
         }
         PyTuple_SET_ITEM(pair, 0, key);
         PyTuple_SET_ITEM(pair, 1, value);
+        pair = shared(&shared_pairs, key, pair);
+        if (pair == NULL) {
+            goto fail;
+        }
         PyTuple_SET_ITEM(fields[4], i, pair);
+    }
+    if (count > 0) {
+        fields[4] = shared(&shared_values, fields[1], fields[4]);
+        if (fields[4] == NULL) {
+            goto fail;
+        }
     }
     *at = pos;
     return new_status(fields);
@@ -170,7 +239,7 @@ static Py_hash_t hash_bytes(const unsigned char *data, Py_ssize_t length) {
 }
 
 static int check_ready(void) {
-    if (status_type == NULL || decode_error == NULL) {
+    if (status_type == NULL || decode_error == NULL || shared_values.kept == NULL) {
         PyErr_SetString(PyExc_RuntimeError, "overseer.codec._cstatus.setup() was not called");
         return -1;
     }
@@ -479,11 +548,25 @@ static PyObject *setup(PyObject *module, PyObject *const *args, Py_ssize_t nargs
         PyErr_SetString(PyExc_TypeError, "decode_error must be an exception class");
         return NULL;
     }
+    if (shared_pairs.kept == NULL && (shared_pairs.kept = PyDict_New()) == NULL) {
+        return NULL;
+    }
+    if (shared_values.kept == NULL && (shared_values.kept = PyDict_New()) == NULL) {
+        return NULL;
+    }
     Py_INCREF(type);
     Py_INCREF(error);
     Py_XSETREF(status_type, (PyTypeObject *)type);
     Py_XSETREF(decode_error, error);
     Py_RETURN_NONE;
+}
+
+/* shared_sizes(): how many key-value pairs and values tuples the decoder keeps to share. */
+static PyObject *shared_sizes(PyObject *module, PyObject *unused) {
+    if (check_ready() < 0) {
+        return NULL;
+    }
+    return Py_BuildValue("(nn)", PyDict_GET_SIZE(shared_pairs.kept), PyDict_GET_SIZE(shared_values.kept));
 }
 
 static PyMethodDef methods[] = {
@@ -499,6 +582,8 @@ static PyMethodDef methods[] = {
      "len(bounds) - 1 statuses from pos, filling bounds with where each began and the last ended."},
     {"scan_changed", (PyCFunction)(void (*)(void))scan_changed, METH_FASTCALL,
      "The statuses that changed since the last payload, updating bounds and hashes in place."},
+    {"shared_sizes", shared_sizes, METH_NOARGS,
+     "How many key-value pairs and values tuples the decoder keeps to share."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -517,7 +602,8 @@ PyMODINIT_FUNC PyInit__cstatus(void) {
     }
     if (PyModule_AddIntConstant(module, "CDR_LE", CDR_LE) < 0 ||
         PyModule_AddIntConstant(module, "CDR_BE", CDR_BE) < 0 ||
-        PyModule_AddIntConstant(module, "ROS1", ROS1) < 0) {
+        PyModule_AddIntConstant(module, "ROS1", ROS1) < 0 ||
+        PyModule_AddIntConstant(module, "SHARED_LIMIT", SHARED_LIMIT) < 0) {
         Py_DECREF(module);
         return NULL;
     }

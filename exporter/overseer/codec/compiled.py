@@ -4,6 +4,10 @@ The C decoder reads statuses exactly as the pure-Python readers of `cdr.py` and 
 same named tuples with the same `DecodeError`s; those readers stay the reference and the fallback. It is
 used when the package was installed with a C compiler at hand, unless `OVERSEER_PURE_PYTHON=1` is in the
 environment. `use_compiled` switches at run time (the tests run the codec tests on both paths).
+
+Unlike them, it keeps one copy of the key-value pairs and values tuples that statuses repeat (robots of
+one fleet report the same ones), up to `SHARED_LIMIT` of each, and stops looking up those of a key or a
+status whose values rarely repeat: the statuses are equal either way, and the model holds fewer objects.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ else:
 StatusReader = Callable[[bytes, int, int], tuple[DiagnosticStatus, int]]
 
 AVAILABLE = _cstatus is not None
+SHARED_LIMIT = _cstatus.SHARED_LIMIT if AVAILABLE else 0
 PURE_PYTHON_VARIABLE = "OVERSEER_PURE_PYTHON"
 
 # Read by the codecs for every payload: whether they hand out the compiled readers.
@@ -101,3 +106,8 @@ def scan_changed(
     return _cstatus.scan_changed(
         layout, payload, pos, end, bounds, hashes, misaligned, max_length, max_values
     )
+
+
+def shared_sizes() -> tuple[int, int]:
+    """How many key-value pairs and values tuples the compiled decoder keeps to share between statuses."""
+    return _cstatus.shared_sizes()
