@@ -1,13 +1,17 @@
 """The compiled decoder keeps one copy of the key-values that robots repeat, and a bounded number of them.
 
 A fleet's robots report the same values (a camera's fps, a motor's state) for hours; the model holds
-one copy of each instead of one a robot. Values that never repeat are soon no longer looked up, and
-no table grows past `SHARED_LIMIT`, whatever the fleet sends.
+one copy of each instead of one a robot. Values that never repeat are soon no longer looked up, long
+texts and long values tuples are never kept, and no table grows past its limit, whatever the fleet
+sends. Every test starts from tables as at import (`forget_shared`): what earlier tests decoded, and the
+records of keys that rarely repeated, would otherwise decide what these find shared.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+
+import pytest
 
 from overseer.codec import cdr, compiled
 from overseer.codec.wire import decode_array
@@ -15,6 +19,20 @@ from overseer.ingest.payload import PayloadIngest
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel
 from support.codec_paths import codec_path
+
+
+@pytest.fixture(autouse=True)
+def tables_as_at_import() -> Iterator[None]:
+    """Each test starts with nothing shared and no key resting."""
+    compiled.forget_shared()
+    yield
+    compiled.forget_shared()
+
+
+def decoded(statuses: Iterable[DiagnosticStatus]) -> tuple[DiagnosticStatus, ...]:
+    """`statuses` encoded as DDS delivers them, then decoded by the compiled decoder."""
+    with codec_path("compiled"):
+        return decode_array(cdr.WIRE_FORMAT, payload(statuses)).statuses
 
 
 def camera(fps: str, state: str = "Streaming") -> DiagnosticStatus:
@@ -56,9 +74,8 @@ def test_two_robots_reporting_the_same_values_hold_one_copy_of_them() -> None:
 
 
 def test_a_value_that_differs_leaves_the_pairs_beside_it_shared() -> None:
-    with codec_path("compiled"):
-        first = decode_array(cdr.WIRE_FORMAT, payload([camera("30.0")])).statuses[0]
-        second = decode_array(cdr.WIRE_FORMAT, payload([camera("29.5")])).statuses[0]
+    (first,) = decoded([camera("30.0")])
+    (second,) = decoded([camera("29.5")])
     assert second.values == (("state", "Streaming"), ("fps", "29.5"))
     assert second.values is not first.values
     assert second.values[0] is first.values[0]
@@ -74,32 +91,44 @@ def test_the_pure_python_decoder_gives_equal_statuses() -> None:
     assert shared == reference
 
 
+def test_long_texts_and_long_values_tuples_are_not_kept() -> None:
+    long_value = "x" * (compiled.SHARED_TEXT - len("log") + 1)
+    wide = tuple((f"cell{n}", "3.7") for n in range(compiled.SHARED_PAIRS + 1))
+    statuses = [
+        DiagnosticStatus(0, "/logger", "", "", (("log", long_value),)),
+        DiagnosticStatus(0, "/battery", "", "", wide),
+    ]
+    first, second = decoded(statuses), decoded(statuses)
+    assert first == second == tuple(statuses)
+    assert first[0].values[0] is not second[0].values[0]
+    assert first[1].values is not second[1].values
+    assert all(a is b for a, b in zip(first[1].values, second[1].values, strict=True))
+    assert compiled.shared_sizes() == (compiled.SHARED_PAIRS + 1, 0)
+
+
 def test_values_that_never_repeat_are_soon_no_longer_looked_up() -> None:
     measured = 10_000
-    with codec_path("compiled"):
-        sizes = [compiled.shared_sizes()[0]]
-        for start in range(0, measured, 100):
-            statuses = [
-                DiagnosticStatus(0, f"/odometer{n}", "", "", (("odometer_never_repeats", f"{n}.5"),))
-                for n in range(start, start + 100)
-            ]
-            decode_array(cdr.WIRE_FORMAT, payload(statuses))
-            sizes.append(compiled.shared_sizes()[0])
+    sizes = [compiled.shared_sizes()[0]]
+    for start in range(0, measured, 100):
+        decoded(
+            DiagnosticStatus(0, f"/odometer{n}", "", "", (("odometer_never_repeats", f"{n}.5"),))
+            for n in range(start, start + 100)
+        )
+        sizes.append(compiled.shared_sizes()[0])
     # A window of 64 lookups, then 1,024 items unshared: about 640 of the 10,000 taken in.
     assert insertions(sizes) < measured // 8
 
 
 def test_no_table_grows_past_its_limit_while_values_repeat_enough_to_be_shared() -> None:
-    distinct = compiled.SHARED_LIMIT * 2
-    largest = 0
-    with codec_path("compiled"):
-        for start in range(0, distinct, 250):
-            # Each value four times in a row: three in four lookups find an equal, so sharing goes on.
-            statuses = [
-                DiagnosticStatus(0, "/counter", "", "", (("count_repeated", str(n)),))
-                for n in range(start, start + 250)
-                for _ in range(4)
-            ]
-            decode_array(cdr.WIRE_FORMAT, payload(statuses))
-            largest = max(largest, *compiled.shared_sizes())
-    assert compiled.SHARED_LIMIT // 2 < largest <= compiled.SHARED_LIMIT
+    largest_pairs = largest_values = 0
+    for start in range(0, compiled.SHARED_PAIRS_LIMIT * 2, 250):
+        # Each value four times in a row: three in four lookups find an equal, so sharing goes on.
+        decoded(
+            DiagnosticStatus(0, "/counter", "", "", (("count_repeated", str(n)),))
+            for n in range(start, start + 250)
+            for _ in range(4)
+        )
+        pairs, values = compiled.shared_sizes()
+        largest_pairs, largest_values = max(largest_pairs, pairs), max(largest_values, values)
+    assert compiled.SHARED_PAIRS_LIMIT // 2 < largest_pairs <= compiled.SHARED_PAIRS_LIMIT
+    assert compiled.SHARED_VALUES_LIMIT // 2 < largest_values <= compiled.SHARED_VALUES_LIMIT

@@ -3,7 +3,8 @@
  * It decodes exactly as the pure-Python readers in cdr.py and ros1.py do, into the same
  * DiagnosticStatus named tuples, with the same DecodeError messages. Every length read from the payload
  * is checked against the bytes that remain before it is used or anything is allocated for it: a hostile
- * payload costs at most its own size and ends in DecodeError. A length or count read from the payload is
+ * payload costs at most its own size (and what the shared tables below keep of it, bounded by them) and
+ * ends in DecodeError. A length or count read from the payload is
  * compared, as an unsigned 64-bit number, with the bytes that remain, so nothing can overflow or turn
  * negative, whatever the width of Py_ssize_t.
  */
@@ -23,16 +24,21 @@ static PyObject *decode_error = NULL;    /* overseer.codec.errors.DecodeError */
 
 /* The key-value pairs and the values tuples decoded before, each kept once: robots of one fleet report
  * the same values (a camera's 30.0 fps, a motor's "Running") and keep them for hours, and a pair with
- * its text costs more than the component that holds it. A table that reaches SHARED_LIMIT entries
- * starts again empty, so that a fleet of ever-new values holds at most that many it no longer uses.
+ * its text costs more than the component that holds it. Only small items are kept: a pair whose key and
+ * value hold SHARED_TEXT bytes or fewer, a values tuple of at most SHARED_PAIRS such pairs. A table that
+ * reaches its limit starts again empty, so that a fleet of ever-new values keeps at most that many items
+ * it no longer uses: about 12 MB in all, with every text as long as may be kept.
  *
  * Looking up a value no one else reported costs about as much as decoding it, and some values are
- * measurements that never repeat. So each pair's key (each values tuple's status name) has a record of
- * how often its lookups found an equal: one that found one for fewer than one in SHARED_WORTH of a
- * window's lookups rests (shares nothing) for the next SHARED_REST items, then tries again. Records are
- * slots picked by the address of the key or name, which the decoder interns: two that share a slot
- * share a record, which costs at most some sharing, never a wrong value. */
-#define SHARED_LIMIT 16384
+ * measurements that never repeat. So each pair's key (each values tuple's status name) has a record: a
+ * record whose last SHARED_WINDOW lookups found an equal fewer than one time in SHARED_WORTH rests
+ * (shares nothing) for the next SHARED_REST items, then tries again. Records are slots picked by the
+ * address of the key or name, which the decoder interns; keys or names that share a slot share its
+ * record and its rest, which costs at most some sharing, never a wrong value. */
+#define SHARED_PAIRS_LIMIT 16384
+#define SHARED_VALUES_LIMIT 2048
+#define SHARED_TEXT 64
+#define SHARED_PAIRS 8
 #define SHARED_WINDOW 64
 #define SHARED_WORTH 4
 #define SHARED_REST (16 * SHARED_WINDOW)
@@ -45,11 +51,12 @@ struct sharing {
 
 struct shared_table {
     PyObject *kept; /* a dict of each item kept to itself */
+    Py_ssize_t limit;
     struct sharing slots[SHARED_SLOTS];
 };
 
-static struct shared_table shared_pairs;  /* slots by key */
-static struct shared_table shared_values; /* slots by status name */
+static struct shared_table shared_pairs = {.limit = SHARED_PAIRS_LIMIT};   /* slots by key */
+static struct shared_table shared_values = {.limit = SHARED_VALUES_LIMIT}; /* slots by status name */
 
 struct reader {
     const unsigned char *data;
@@ -116,6 +123,11 @@ static PyObject *new_status(PyObject *fields[5]) {
     return status;
 }
 
+/* The bytes of a text's characters, as it holds them. */
+static Py_ssize_t text_bytes(PyObject *text) {
+    return PyUnicode_GET_LENGTH(text) * PyUnicode_KIND(text);
+}
+
 /* `item`, or an equal one the table kept before (a new reference either way); steals `item`.
  * `by` (the key or name, interned) picks the record of how often sharing found an equal. */
 static PyObject *shared(struct shared_table *table, PyObject *by, PyObject *item) {
@@ -125,7 +137,7 @@ static PyObject *shared(struct shared_table *table, PyObject *by, PyObject *item
         record->resting--;
         return item;
     }
-    if (PyDict_GET_SIZE(table->kept) >= SHARED_LIMIT) {
+    if (PyDict_GET_SIZE(table->kept) >= table->limit) {
         PyDict_Clear(table->kept);
     }
     PyObject *kept = PyDict_SetDefault(table->kept, item, item);
@@ -133,9 +145,9 @@ static PyObject *shared(struct shared_table *table, PyObject *by, PyObject *item
         Py_DECREF(item);
         return NULL;
     }
+    record->found += kept != item;
     Py_INCREF(kept);
     Py_DECREF(item);
-    record->found += kept != item;
     if (++record->lookups == SHARED_WINDOW) {
         if (record->found * SHARED_WORTH < SHARED_WINDOW) {
             record->resting = SHARED_REST;
@@ -189,12 +201,13 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
     if (fields[4] == NULL) {
         goto fail;
     }
+    int small = count <= SHARED_PAIRS; /* so far: the values tuple may be shared */
     for (uint32_t i = 0; i < count; i++) {
         PyObject *key = read_string(r, &pos);
         if (key == NULL) {
             goto fail;
         }
-        PyUnicode_InternInPlace(&key); /* keys repeat too; a value is shared with its key below */
+        PyUnicode_InternInPlace(&key); /* keys repeat too; values are shared below, as pairs */
         PyObject *value = read_string(r, &pos);
         if (value == NULL) {
             Py_DECREF(key);
@@ -208,13 +221,17 @@ static PyObject *read_status(struct reader *r, Py_ssize_t *at) {
         }
         PyTuple_SET_ITEM(pair, 0, key);
         PyTuple_SET_ITEM(pair, 1, value);
-        pair = shared(&shared_pairs, key, pair);
-        if (pair == NULL) {
-            goto fail;
+        if (text_bytes(key) + text_bytes(value) <= SHARED_TEXT) {
+            pair = shared(&shared_pairs, key, pair);
+            if (pair == NULL) {
+                goto fail;
+            }
+        } else {
+            small = 0;
         }
         PyTuple_SET_ITEM(fields[4], i, pair);
     }
-    if (count > 0) {
+    if (count > 0 && small) {
         fields[4] = shared(&shared_values, fields[1], fields[4]);
         if (fields[4] == NULL) {
             goto fail;
@@ -239,7 +256,8 @@ static Py_hash_t hash_bytes(const unsigned char *data, Py_ssize_t length) {
 }
 
 static int check_ready(void) {
-    if (status_type == NULL || decode_error == NULL || shared_values.kept == NULL) {
+    if (status_type == NULL || decode_error == NULL || shared_pairs.kept == NULL ||
+        shared_values.kept == NULL) {
         PyErr_SetString(PyExc_RuntimeError, "overseer.codec._cstatus.setup() was not called");
         return -1;
     }
@@ -561,6 +579,19 @@ static PyObject *setup(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     Py_RETURN_NONE;
 }
 
+/* shared_reset(): forget every item kept and every record, as at import. */
+static PyObject *shared_reset(PyObject *module, PyObject *unused) {
+    if (check_ready() < 0) {
+        return NULL;
+    }
+    struct shared_table *tables[] = {&shared_pairs, &shared_values};
+    for (int i = 0; i < 2; i++) {
+        PyDict_Clear(tables[i]->kept);
+        memset(tables[i]->slots, 0, sizeof tables[i]->slots);
+    }
+    Py_RETURN_NONE;
+}
+
 /* shared_sizes(): how many key-value pairs and values tuples the decoder keeps to share. */
 static PyObject *shared_sizes(PyObject *module, PyObject *unused) {
     if (check_ready() < 0) {
@@ -582,6 +613,7 @@ static PyMethodDef methods[] = {
      "len(bounds) - 1 statuses from pos, filling bounds with where each began and the last ended."},
     {"scan_changed", (PyCFunction)(void (*)(void))scan_changed, METH_FASTCALL,
      "The statuses that changed since the last payload, updating bounds and hashes in place."},
+    {"shared_reset", shared_reset, METH_NOARGS, "Forget every key-value pair and values tuple kept, and why."},
     {"shared_sizes", shared_sizes, METH_NOARGS,
      "How many key-value pairs and values tuples the decoder keeps to share."},
     {NULL, NULL, 0, NULL},
@@ -603,7 +635,10 @@ PyMODINIT_FUNC PyInit__cstatus(void) {
     if (PyModule_AddIntConstant(module, "CDR_LE", CDR_LE) < 0 ||
         PyModule_AddIntConstant(module, "CDR_BE", CDR_BE) < 0 ||
         PyModule_AddIntConstant(module, "ROS1", ROS1) < 0 ||
-        PyModule_AddIntConstant(module, "SHARED_LIMIT", SHARED_LIMIT) < 0) {
+        PyModule_AddIntConstant(module, "SHARED_PAIRS_LIMIT", SHARED_PAIRS_LIMIT) < 0 ||
+        PyModule_AddIntConstant(module, "SHARED_VALUES_LIMIT", SHARED_VALUES_LIMIT) < 0 ||
+        PyModule_AddIntConstant(module, "SHARED_TEXT", SHARED_TEXT) < 0 ||
+        PyModule_AddIntConstant(module, "SHARED_PAIRS", SHARED_PAIRS) < 0) {
         Py_DECREF(module);
         return NULL;
     }

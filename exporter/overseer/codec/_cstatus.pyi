@@ -7,7 +7,10 @@ from overseer.messages import DiagnosticStatus
 CDR_LE: int
 CDR_BE: int
 ROS1: int
-SHARED_LIMIT: int
+SHARED_PAIRS_LIMIT: int
+SHARED_VALUES_LIMIT: int
+SHARED_TEXT: int
+SHARED_PAIRS: int
 
 def setup(status_type: type[DiagnosticStatus], decode_error: type[Exception], /) -> None: ...
 def read_status_cdr_le(payload: bytes, pos: int, end: int, /) -> tuple[DiagnosticStatus, int]: ...
@@ -28,4 +31,5 @@ def scan_changed(
     max_values: int,
     /,
 ) -> tuple[list[tuple[int, DiagnosticStatus]], int, bool]: ...
+def shared_reset() -> None: ...
 def shared_sizes() -> tuple[int, int]: ...

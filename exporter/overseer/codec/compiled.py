@@ -5,9 +5,10 @@ same named tuples with the same `DecodeError`s; those readers stay the reference
 used when the package was installed with a C compiler at hand, unless `OVERSEER_PURE_PYTHON=1` is in the
 environment. `use_compiled` switches at run time (the tests run the codec tests on both paths).
 
-Unlike them, it keeps one copy of the key-value pairs and values tuples that statuses repeat (robots of
-one fleet report the same ones), up to `SHARED_LIMIT` of each, and stops looking up those of a key or a
-status whose values rarely repeat: the statuses are equal either way, and the model holds fewer objects.
+Unlike them, it keeps one copy of the small key-value pairs and values tuples that statuses repeat
+(robots of one fleet report the same ones), up to `SHARED_PAIRS_LIMIT` and `SHARED_VALUES_LIMIT` of them,
+and for a while looks up none of a key or a status whose values rarely repeat: the statuses are equal
+either way, and a fleet's model holds fewer objects.
 """
 
 from __future__ import annotations
@@ -29,7 +30,10 @@ else:
 StatusReader = Callable[[bytes, int, int], tuple[DiagnosticStatus, int]]
 
 AVAILABLE = _cstatus is not None
-SHARED_LIMIT = _cstatus.SHARED_LIMIT if AVAILABLE else 0
+SHARED_PAIRS_LIMIT = _cstatus.SHARED_PAIRS_LIMIT if AVAILABLE else 0
+SHARED_VALUES_LIMIT = _cstatus.SHARED_VALUES_LIMIT if AVAILABLE else 0
+SHARED_TEXT = _cstatus.SHARED_TEXT if AVAILABLE else 0  # bytes of a pair's key and value, at most
+SHARED_PAIRS = _cstatus.SHARED_PAIRS if AVAILABLE else 0  # pairs of a values tuple shared, at most
 PURE_PYTHON_VARIABLE = "OVERSEER_PURE_PYTHON"
 
 # Read by the codecs for every payload: whether they hand out the compiled readers.
@@ -106,6 +110,11 @@ def scan_changed(
     return _cstatus.scan_changed(
         layout, payload, pos, end, bounds, hashes, misaligned, max_length, max_values
     )
+
+
+def forget_shared() -> None:
+    """Make the compiled decoder forget the key-values it keeps to share, and how often they repeated."""
+    _cstatus.shared_reset()
 
 
 def shared_sizes() -> tuple[int, int]:
