@@ -2,8 +2,8 @@
 
 End to end through a Zenoh router to a real exporter: every change the probe publishes must be read
 back with a latency between zero and its read timeout, read only until it shows (not every poll of
-the window: the reads cost the exporter CPU the benchmark counts), and an exporter that never hears the probe (no
-router between them) must give no latency at all.
+the window: the reads cost the exporter CPU the benchmark counts), and an exporter that never hears
+the probe (no router between them) must give no latency at all.
 """
 
 from __future__ import annotations
