@@ -5,8 +5,9 @@ period one of its values changes to the wall time it is sent at, written in plac
 sent, a thread reads that robot's JSON document from the exporter every `poll` seconds until it shows
 it; the first read that does gives that change's latency: an upper bound, by at most one poll and one
 read. Between a change seen and the next one sent it does not read: a 50-component document costs the
-exporter about a millisecond to build, and 20 reads a second were 3-4 % of a core at 3,000 robots,
-counted in its CPU a message (more with ingest workers, whose answers cross a pipe).
+exporter about a millisecond to build, and 20 reads a second were 3-4 % of a core at 3,000 robots with
+two ingest workers (whose answers cross a pipe), counted in its CPU a message. A change that takes
+longer to show is read for longer: about 1 + latency / poll reads a change.
 """
 
 from __future__ import annotations
@@ -158,16 +159,17 @@ class ChangeProbe:
                 self._sent.notify_all()
             self._stop.wait(self._period)
 
-    def _await_change(self, seen: float | None) -> None:
-        """Return once a change newer than `seen` was sent, or the probe stops."""
+    def _await_change(self, seen: float | None) -> bool:
+        """Wait until a change newer than `seen` was sent (True), or the probe stops (False)."""
         with self._sent:
             while seen is not None and self._latest == seen and not self._stop.is_set():
                 self._sent.wait()
+            return not self._stop.is_set()
 
     def _read(self) -> None:
         last: float | None = None
-        while not self._stop.wait(self._poll):
-            self._await_change(last)
+        # Waits for a change before the poll: a read at once after the change is sent would show the old one.
+        while self._await_change(last) and not self._stop.wait(self._poll):
             self.reads += 1
             try:
                 with urllib.request.urlopen(self._url, timeout=10) as response:

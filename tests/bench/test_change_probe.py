@@ -41,8 +41,10 @@ def test_each_change_is_timed_once_it_reaches_the_exporter(tmp_path: Path) -> No
     assert probe.published >= 10
     assert len(probe.latencies) >= 5  # the first change read is not timed: it may predate the first read
     assert all(0 < latency < 2 for latency in probe.latencies), probe.latencies
-    # Polled every 50 ms throughout, 6 s would be ~120 reads; until each change shows, a few a change.
-    assert probe.reads <= 4 * probe.published, (probe.reads, probe.published)
+    # Polled every 50 ms throughout, 6 s would be ~120 reads; until each change shows, a few a change
+    # (those that failed, before the exporter first heard the probe, left out).
+    answered = probe.reads - probe.failed_reads
+    assert answered <= 3 * probe.published, (probe.reads, probe.failed_reads, probe.published)
 
 
 @pytest.mark.servers
