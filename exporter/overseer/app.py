@@ -63,7 +63,7 @@ def open_fleet(
     """
     if config.ingest.workers == 1:
         return LocalFleet.build(config, None if history is None else history.store.add, start())
-    return PooledFleet(config, None if history is None else history.store.add_rows, start)
+    return PooledFleet(config, None if history is None else history.store.add_packed, start)
 
 
 @dataclass

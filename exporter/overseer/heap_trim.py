@@ -2,7 +2,7 @@
 
 When the ingest falls behind (a fleet heard for the first time, 10,000 robots' first arrays at once),
 the samples waiting for it pile up, tens of thousands of them, a few kB each (`sources/paced_drain.py`,
-`sources/zenoh/outbox.py`).
+`sources/zenoh/outbox.py`), and so do the events waiting for their database (`history/store.py`).
 Once they are read, the heap they were allocated from stays the process's: glibc returns memory to the
 system only from the top of a heap, and the freed samples lie between the model's live objects. At
 10,000 robots x 50 components over Zenoh (`bench.bench_scale`, one worker) that was 0.4-0.9 kB a
@@ -32,6 +32,8 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 TRIM_INTERVAL_SECONDS = 60.0
+# Items once waiting together (samples, ~80 MB of them; events) after which their heap is handed back.
+TRIM_AFTER_BACKLOG = 20_000
 HEAP_ARENAS = 2
 MMAP_THRESHOLD_BYTES = 1 << 20
 _M_MMAP_THRESHOLD = -3  # mallopt's parameters (malloc.h)

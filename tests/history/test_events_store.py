@@ -9,6 +9,7 @@ import multiprocessing
 import os
 import sqlite3
 import subprocess
+import sys
 import time
 import tracemalloc
 from collections.abc import Iterator
@@ -20,6 +21,7 @@ from prometheus_client import generate_latest
 from prometheus_client.registry import CollectorRegistry
 
 from overseer.config.events import EventsConfig
+from overseer.history import store as store_module
 from overseer.history.metrics import EventsCollector
 from overseer.history.query import EventQuery, decode_cursor
 from overseer.history.service import EventHistory
@@ -31,7 +33,7 @@ from overseer.history.store import (
     StoreSettings,
 )
 from overseer.levels import Level
-from overseer.model.events import Event, EventRow, event_of_row, event_rows
+from overseer.model.events import Event, EventRow, event_of_row, event_rows, pack_rows
 from support.clock import ManualClock
 
 DAY = 86400.0
@@ -250,18 +252,18 @@ def test_hostile_strings_are_stored_and_returned_intact(tmp_path: Path) -> None:
 
 
 def test_rows_sent_through_a_pipe_are_stored_as_the_events_they_came_from(tmp_path: Path) -> None:
-    # An ingest worker sends its events as rows; the exporter's store writes them as it writes events.
+    # An ingest worker sends its events as packed rows; the exporter's store writes them as it writes events.
     events = [
         Event(1000.0 + i, text or "r", "level", text, text, Level.OK, Level.WARN, text, ((text, text),))
         for i, text in enumerate(HOSTILE)
     ] + [Event(2000.0, "robot1", "robot_down", message="silent"), level_event(2001.0)]
     assert [event_of_row(row) for row in event_rows(events)] == events
     sent, received = multiprocessing.Pipe(duplex=False)
-    received.send(event_rows(events))
+    received.send(pack_rows(event_rows(events)))
     direct = EventStore(settings(tmp_path / "direct.db"))
     piped = EventStore(settings(tmp_path / "piped.db"))
     direct.add(events)
-    piped.add_rows(sent.recv())
+    piped.add_packed(sent.recv())
     assert direct.flush() == piped.flush() == len(events)
     assert direct.query(EventQuery())[0] == piped.query(EventQuery())[0]
 
@@ -332,34 +334,78 @@ def test_a_full_queue_drops_and_counts(tmp_path: Path) -> None:
     assert 'overseer_events_dropped_total{reason="queue_full"} 31.0' in metrics(store)
 
 
-def test_queued_events_keep_no_tuple_of_their_own(tmp_path: Path) -> None:
-    # A fleet's first look queues hundreds of thousands of events while the model builds its components,
-    # tuples of the same size: rows kept as tuples left the model's memory full of holes once written.
+def test_the_heap_is_given_back_once_a_backlog_of_events_is_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    trimmed: list[int] = []
+    store = EventStore(settings(tmp_path / "events.db"))
+    monkeypatch.setattr(store_module, "TRIM_AFTER_BACKLOG", 50)
+
+    def trim() -> bool:
+        trimmed.append(store.stats().written)
+        return True
+
+    monkeypatch.setattr(store_module, "trim_heap", trim)
+    for backlog in (60, 70, 10, 10, 40, 5):  # a backlog written in two flushes, then small flushes only
+        store.add([level_event(float(i)) for i in range(backlog)])
+        store.flush()
+    assert trimmed == [130]  # once, at the first small flush after the backlog, which it had written
+    store.stop()
+
+
+def test_a_packed_batch_beyond_the_queue_keeps_what_fits_in_order(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db", queue_limit=100))
+    store.add_packed(pack_rows(event_rows([level_event(float(i)) for i in range(70)])))
+    store.add_packed(pack_rows(event_rows([level_event(float(i)) for i in range(70, 140)])))
+    store.add_packed(pack_rows(event_rows([level_event(200.0)])))
+    assert store.flush() == 100
+    assert store.stats().dropped["queue_full"] == 41
+    assert [event["time"] for event in everything(store)] == [float(i) for i in reversed(range(100))]
+
+
+def test_queued_events_keep_no_python_object_of_their_own(tmp_path: Path) -> None:
+    # A fleet's first look queues hundreds of thousands of events while the writer falls behind. As
+    # strings and floats of their own they filled Python's arenas of small objects, which stay the
+    # process's until empty: objects born meanwhile and living on kept 60 MB of them at 10,000 robots.
     store = EventStore(settings(tmp_path / "events.db"))  # not started: what is queued stays queued
     count = 20_000
-    texts = [(1000.0 + i, f"robot{i}", f"/c{i}", f"message {i}", f'[["v","{i}"]]') for i in range(count)]
     gc.collect()
     tracemalloc.start()
     try:
-        before = tracemalloc.get_traced_memory()[0]
-        rows: list[EventRow] = [
-            (at, robot, "level", name, "", 0, 2, message, values)
-            for at, robot, name, message, values in texts
-        ]
-        store.add_rows(rows)
-        del rows
+        blocks_before, bytes_before = sys.getallocatedblocks(), tracemalloc.get_traced_memory()[0]
+        for start in range(0, count, 1_000):  # in batches, as a worker's events come
+            rows: list[EventRow] = [
+                (1000.0 + i, f"robot{i}", "level", f"/c{i}", f"hw{i}", 0, 2, f"message {i}", f'[["v","{i}"]]')
+                for i in range(start, start + 1_000)
+            ]
+            store.add_rows(rows)
+            del rows
         gc.collect()
-        kept = tracemalloc.get_traced_memory()[0] - before
+        objects = sys.getallocatedblocks() - blocks_before
+        kept = tracemalloc.get_traced_memory()[0] - bytes_before
     finally:
         tracemalloc.stop()
-    # Nine references an event (72 bytes, and a list's spare room), not a 112-byte tuple and a reference.
-    assert kept / count < 100, f"{kept / count:.0f} bytes an event queued"
+    # A block of bytes a batch: no string, float or tuple an event (the fields as objects kept six).
+    assert objects / count < 0.01, f"{objects / count:.2f} Python objects an event queued"
+    assert kept / count < 150, f"{kept / count:.0f} bytes an event queued"
     assert store.flush() == count
     newest, _ = store.query(EventQuery(limit=2))
-    assert [(event["robot"], event["values"]) for event in newest] == [
-        ("robot19999", [{"key": "v", "value": "19999"}]),
-        ("robot19998", [{"key": "v", "value": "19998"}]),
+    assert [(event["robot"], event["hardware_id"], event["values"]) for event in newest] == [
+        ("robot19999", "hw19999", [{"key": "v", "value": "19999"}]),
+        ("robot19998", "hw19998", [{"key": "v", "value": "19998"}]),
     ]
+    assert len(everything(store)) == count
+
+
+def test_rows_other_than_plain_values_are_refused_and_shift_no_other(tmp_path: Path) -> None:
+    store = EventStore(settings(tmp_path / "events.db"))
+    [good] = event_rows([level_event(1.0)])
+    with pytest.raises(ValueError):
+        store.add_rows([good, (*good[:7], object(), good[8])])  # type: ignore[list-item]
+    store.add_rows(event_rows([level_event(2.0)]))
+    assert store.flush() == 1 and store.stats().dropped["queue_full"] == 0
+    [event] = everything(store)
+    assert (event["time"], event["new_level"]) == (2.0, 2)
 
 
 def test_a_row_of_the_wrong_length_is_refused_and_shifts_no_other(tmp_path: Path) -> None:

@@ -28,7 +28,7 @@ from overseer.fleet.workers.merge import (
 from overseer.fleet.workers.metrics import WorkerPoolCollector
 from overseer.fleet.workers.pool import WorkerPool, WorkersUnavailable
 from overseer.model import FleetSnapshot, Inventory, RememberedRobot
-from overseer.model.events import EventRowSink
+from overseer.model.events import PackedRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
 
 SNAPSHOT_REUSE_SECONDS = 1.0
@@ -43,7 +43,7 @@ class PooledFleet:
     def __init__(
         self,
         config: Config,
-        events: EventRowSink | None = None,
+        events: PackedRowSink | None = None,
         start: Callable[[], FleetStart] | None = None,
     ) -> None:
         """Prepare the pool; no worker runs until `start`. `start` says what a worker follows at first.

@@ -10,6 +10,13 @@ does when a whole fleet is first heard. A full queue drops events and counts the
 retention are deleted every `PRUNE_INTERVAL_SECONDS`, and the oldest go whenever the database outgrows
 its size cap (the file shrinks too: the database uses incremental auto-vacuum).
 
+Each `add` waits as one block of bytes (`PackedRows`), not as the Python objects of its rows. A fleet's
+first look queues hundreds of thousands of events, one a component, while the writer falls behind. As
+strings and floats of their own they filled Python's arenas of small objects, which go back to the
+system only once empty, and a few objects born meanwhile and living on (the robots remembered, the
+relay's routes) kept 60 MB of them at 10,000 robots, for good. Once such a backlog is written, the
+heap its blocks took is handed back to the system (`heap_trim.py`).
+
 A database that cannot be opened (a directory that does not exist or is not writable, a file that is
 not an Overseer event database or is corrupt) is not fatal: the store says why in one log line, reports
 itself down in `overseer_events_store_up`, and counts every event it cannot keep. The exporter goes on
@@ -34,8 +41,18 @@ from pathlib import Path
 from typing import Any
 
 from overseer.database import claim
+from overseer.heap_trim import TRIM_AFTER_BACKLOG, trim_heap
 from overseer.history.query import EventQuery, encode_cursor
-from overseer.model.events import ROW_FIELDS, Event, EventRow, event_of_row, event_rows
+from overseer.model.events import (
+    ROW_FIELDS,
+    Event,
+    EventRow,
+    PackedRows,
+    event_of_row,
+    event_rows,
+    pack_rows,
+    unpack_rows,
+)
 
 log = logging.getLogger(__name__)
 event_log = logging.getLogger("overseer.events")
@@ -104,11 +121,9 @@ class EventStore:
         """Open (or create) the database at `settings.path`; on failure the store runs degraded."""
         self.settings = settings
         self._clock = clock
-        # The queued rows' fields, one after the other: a fleet's first look queues hundreds of thousands,
-        # and as tuples of their own they lay among the model's components (tuples of the same size),
-        # leaving its memory full of holes once written (70 B a component at 4,000 robots of 50).
-        self._queued_fields: list[Any] = []
+        self._queued_blocks: list[bytes] = []  # each `add`'s rows, packed
         self._queued = 0  # rows
+        self._behind = False  # a flush took a backlog of `TRIM_AFTER_BACKLOG` or more, not yet drained
         self._queue_lock = threading.Lock()
         self._write_lock = threading.Lock()
         self._read_lock = threading.Lock()
@@ -147,27 +162,27 @@ class EventStore:
 
     def add_rows(self, rows: list[EventRow]) -> None:
         """Queue events as rows (`event_rows`) for the writer; drops (and counts) what does not fit."""
-        if not rows:
+        if rows:
+            self.add_packed(pack_rows(rows))
+
+    def add_packed(self, packed: PackedRows) -> None:
+        """Queue packed rows (`pack_rows`) for the writer; drops (and counts) what does not fit."""
+        if not packed.events:
             return
         if self._writer is None:
             with self._queue_lock:
-                self._dropped["store_unavailable"] += len(rows)
-            self._log(rows, None)  # a log shipper still gets them
+                self._dropped["store_unavailable"] += packed.events
+            self._log(unpack_rows(packed.block), None)  # a log shipper still gets them
             return
         with self._queue_lock:
             room = self.settings.queue_limit - self._queued
-            if room < len(rows):
-                self._dropped["queue_full"] += len(rows) - max(room, 0)
-                rows = rows[: max(room, 0)]
-                if not rows:
+            if room < packed.events:
+                self._dropped["queue_full"] += packed.events - max(room, 0)
+                if room <= 0:
                     return
-            queued = self._queued_fields
-            end = len(queued)
-            queued.extend(itertools.chain.from_iterable(rows))
-            if len(queued) - end != len(rows) * ROW_FIELDS:  # nothing marks where a row ends: check
-                del queued[end:]
-                raise ValueError(f"event rows of other than {ROW_FIELDS} fields")
-            self._queued += len(rows)
+                packed = pack_rows(unpack_rows(packed.block)[:room])
+            self._queued_blocks.append(packed.block)
+            self._queued += packed.events
 
     def start(self) -> None:
         """Start the writer thread (nothing to do when the database could not be opened)."""
@@ -198,11 +213,20 @@ class EventStore:
     def flush(self) -> int:
         """Write everything queued now, in the calling thread; returns how many events were written."""
         with self._queue_lock:
-            fields, self._queued_fields, self._queued = self._queued_fields, [], 0
-        if not fields:
+            blocks, count, self._queued_blocks, self._queued = self._queued_blocks, self._queued, [], 0
+        self._trim_once_drained(count)
+        if not blocks:
             return 0
         with self._write_lock:
-            return self._write(fields)
+            return self._write(blocks, count)
+
+    def _trim_once_drained(self, taken: int) -> None:
+        """Hand the heap back at the first flush that takes little after one that took a backlog."""
+        if taken >= TRIM_AFTER_BACKLOG:
+            self._behind = True
+        elif self._behind:
+            self._behind = False
+            trim_heap()  # what the backlog's blocks took, written by the flushes before this one
 
     def prune(self) -> int:
         """Delete events older than the retention, and the oldest beyond the size cap; returns how many."""
@@ -274,10 +298,9 @@ class EventStore:
             if time.monotonic() - self._last_prune >= PRUNE_INTERVAL_SECONDS:
                 self.prune()
 
-    def _write(self, fields: list[Any]) -> int:
-        """Insert the rows whose fields `fields` holds one after the other; how many were written."""
+    def _write(self, blocks: list[bytes], count: int) -> int:
+        """Insert the `count` rows packed in `blocks`, in order; how many were written."""
         writer = self._writer
-        count = len(fields) // ROW_FIELDS
         if writer is None:
             with self._queue_lock:
                 self._dropped["store_unavailable"] += count
@@ -285,11 +308,7 @@ class EventStore:
         try:
             writer.execute("BEGIN IMMEDIATE")  # the write lock first: the ids read next stay ours
             first = _sequence(writer) if self.settings.log_events else 0
-            start = 0
-            for size in _statement_sizes(count, self._rows_per_statement):
-                end = start + size * ROW_FIELDS
-                writer.execute(insert_statement(size), fields[start:end])
-                start = end
+            self._insert(writer, blocks)
             writer.execute("COMMIT")
         except sqlite3.Error as error:
             if writer.in_transaction:
@@ -306,17 +325,33 @@ class EventStore:
                     count,
                 )
             self._last_write_error = time.monotonic()
-            self._log(_rows_of(fields), None)
+            self._log(_unpacked(blocks), None)
             return 0
         self._writing_ok = True
         with self._queue_lock:
             self._written += count
-        self._log(_rows_of(fields), first)
+        self._log(_unpacked(blocks), first)
         if self._used_bytes(writer) > self.settings.max_size:
             deleted = self._prune_to_size(writer)
             if deleted:
                 writer.execute("PRAGMA incremental_vacuum")
         return count
+
+    def _insert(self, writer: sqlite3.Connection, blocks: list[bytes]) -> None:
+        """INSERT the rows packed in `blocks`, a block's objects at a time, in `_statement_sizes`' sizes."""
+        per_statement = self._rows_per_statement
+        full = per_statement * ROW_FIELDS
+        fields: list[Any] = []
+        for block in blocks:
+            fields.extend(itertools.chain.from_iterable(unpack_rows(block)))
+            while len(fields) >= full:
+                writer.execute(insert_statement(per_statement), fields[:full])
+                del fields[:full]
+        start = 0
+        for size in _statement_sizes(len(fields) // ROW_FIELDS, per_statement):
+            end = start + size * ROW_FIELDS
+            writer.execute(insert_statement(size), fields[start:end])
+            start = end
 
     def _log(self, rows: Iterable[EventRow], last_id_before: int | None) -> None:
         """Log each event as one line when asked to (JSON logs); with ids when they were stored."""
@@ -370,11 +405,10 @@ def _statement_sizes(rows: int, per_statement: int) -> Iterator[int]:
         size >>= 1
 
 
-def _rows_of(fields: list[Any]) -> Iterator[EventRow]:
-    """The rows whose fields `fields` holds one after the other, built only as they are read."""
-    for start in range(0, len(fields), ROW_FIELDS):
-        row: EventRow = tuple(fields[start : start + ROW_FIELDS])
-        yield row
+def _unpacked(blocks: list[bytes]) -> Iterator[EventRow]:
+    """The rows packed in `blocks`, in order, unpacked a block at a time."""
+    for block in blocks:
+        yield from unpack_rows(block)
 
 
 @functools.lru_cache(maxsize=16)

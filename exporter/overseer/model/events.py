@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import marshal
 from collections.abc import Callable
 from typing import Any, Literal, NamedTuple, get_args
 
@@ -114,5 +115,32 @@ def _values_json(values: tuple[tuple[str, str], ...]) -> str:
 
 # Where transitions go, a batch at a time: the event store, or a worker's pipe to it.
 EventSink = Callable[[list[Event]], None]
-# Where a worker's transitions go in the exporter, as rows: the event store.
-EventRowSink = Callable[[list[EventRow]], None]
+
+
+class PackedRows(NamedTuple):
+    """How many event rows, and the rows packed into one block of bytes (`pack_rows`).
+
+    Events wait in this form for the store's writer, and cross from a worker to the exporter in it: a
+    fleet's first look gives hundreds of thousands at once, and as strings and floats of their own they
+    would fill Python's arenas of small objects, given back only once empty (`history/store.py`).
+    """
+
+    events: int
+    block: bytes
+
+
+def pack_rows(rows: list[EventRow]) -> PackedRows:
+    """`rows` packed; ValueError for a row of other than `ROW_FIELDS` plain values."""
+    if any(len(row) != ROW_FIELDS for row in rows):
+        raise ValueError(f"event rows of other than {ROW_FIELDS} fields")
+    return PackedRows(len(rows), marshal.dumps(rows))  # ValueError too for what is not a plain value
+
+
+def unpack_rows(block: bytes) -> list[EventRow]:
+    """The rows `pack_rows` packed into `block`."""
+    rows: list[EventRow] = marshal.loads(block)
+    return rows
+
+
+# Where a worker's transitions go in the exporter, packed: the event store.
+PackedRowSink = Callable[[PackedRows], None]

@@ -19,7 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from overseer.heap_trim import trim_heap
+from overseer.heap_trim import TRIM_AFTER_BACKLOG, trim_heap
 
 Item = TypeVar("Item")
 Copied = TypeVar("Copied")
@@ -28,7 +28,6 @@ Note = TypeVar("Note")
 PAUSE_SECONDS = 0.01  # what a sample may wait for its batch; at 10,000 messages a second, ~100 a batch
 CHUNK = 100  # items handled between two looks at the source (0.1 s of a large fleet's first arrays)
 SWEEP_LIMIT = 5_000  # items taken from the source at most between two shares of the work
-TRIM_AFTER_BACKLOG = 20_000  # items once waiting together (~80 MB of samples): their heap is given back
 
 
 def drain_paced(

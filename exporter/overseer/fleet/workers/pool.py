@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
 from overseer.fleet.workers.process import FAILED, READY, run_worker
-from overseer.model.events import EventRowSink
+from overseer.model.events import PackedRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
 
 log = logging.getLogger(__name__)
@@ -65,11 +65,11 @@ class WorkerPool:
     def __init__(
         self,
         config: Config,
-        events: EventRowSink | None = None,
+        events: PackedRowSink | None = None,
         start: Callable[[], FleetStart] | None = None,
         relay: ZenohRelay | None = None,
     ) -> None:
-        """Prepare the workers of `config`; `events` receives every worker's events as rows (None: dropped).
+        """Prepare the workers of `config`; `events` receives every worker's events, packed (None: dropped).
 
         `start` tells what a worker follows before it hears anything, asked anew for each worker started
         (a restarted worker follows the inventory and the robots remembered now); `relay`, when given,

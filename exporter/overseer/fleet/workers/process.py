@@ -24,7 +24,7 @@ from overseer.fleet.workers.merge import portable_robots
 from overseer.garbage_collection import collect_in_large_batches
 from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
-from overseer.model.events import Event, event_rows
+from overseer.model.events import Event, event_rows, pack_rows
 from overseer.model.robot_cap import SharedRobotCap
 
 log = logging.getLogger(__name__)
@@ -152,7 +152,8 @@ def _serve(
 class _EventSender:
     """Sends the detector's events to the exporter from a thread of its own, so ingest never waits on it.
 
-    They go as the store's rows: the exporter only writes them (a fleet first heard gives 50 a robot).
+    They go as the store's rows, packed: the exporter only queues and writes them (a fleet first heard
+    gives 50 a robot).
     """
 
     def __init__(self, connection: Connection) -> None:
@@ -170,6 +171,6 @@ class _EventSender:
             while not self._queue.empty() and len(batch) < 10_000:
                 batch = batch + self._queue.get()
             try:
-                self._connection.send(event_rows(batch))
+                self._connection.send(pack_rows(event_rows(batch)))
             except (BrokenPipeError, OSError):
                 return  # the exporter is gone; the request loop ends the worker

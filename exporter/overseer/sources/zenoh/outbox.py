@@ -19,8 +19,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from overseer.heap_trim import trim_heap
-from overseer.sources.paced_drain import TRIM_AFTER_BACKLOG
+from overseer.heap_trim import TRIM_AFTER_BACKLOG, trim_heap
 from overseer.sources.zenoh.keys import attachment_fields
 from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
 
