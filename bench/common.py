@@ -143,6 +143,29 @@ def tree_resident_bytes(pid: int) -> int:
     return total
 
 
+def tree_proportional_bytes(pid: int) -> int:
+    """Proportional memory (PSS) of `pid` and its live descendants, summed: shared pages counted once."""
+    total = 0
+    for member in process_tree(pid):
+        with (
+            contextlib.suppress(OSError, ValueError),
+            open(f"/proc/{member}/smaps_rollup", encoding="ascii") as rollup,
+        ):
+            total += next(int(line.split()[1]) for line in rollup if line.startswith("Pss:")) * 1024
+    return total
+
+
+def highest_tree_resident(pid: int, until: float, every: float = 1.0) -> int:
+    """The most resident memory of `pid` and its descendants, read every `every` s until `until`."""
+    highest = 0
+    while True:
+        highest = max(highest, tree_resident_bytes(pid))
+        left = until - time.monotonic()
+        if left <= 0:
+            return highest
+        time.sleep(min(every, left))
+
+
 @contextlib.contextmanager
 def busy_interpreter() -> Iterator[None]:
     """A thread running pure Python that never waits, as the ingest does while samples queue up.

@@ -38,10 +38,14 @@ def test_a_small_fleet_at_two_hertz_is_published_measured_and_labelled_as_asked(
     assert row("lost by a subscriber that only counts (same router, same run)").value == 0
     assert row("lost beyond it").value == 0 and row("lost beyond it").met
     assert row("exporter CPU a message").value > 0
-    assert row("exporter memory a component").unit == "bytes" and row("exporter memory a component").value > 0
+    memory = row("exporter memory a component (resident, all its processes)")
+    assert memory.unit == "bytes" and memory.value > 0 and memory.target == "<= 1000"
+    # shared pages (the interpreter, the libraries) counted once: less than each process counting them
+    assert 0 < row("proportional (PSS: pages the processes share counted once)").value < memory.value
+    assert row("the most in the steady window (read every second)").value > 0
     # what the fleet added: far less than the whole at this size, the processes' own memory left out
     beyond = next(r for figure, r in rows.items() if figure.startswith(f"{label}: of which beyond its"))
-    assert 0 < beyond.value < row("exporter memory a component").value / 2, (beyond.figure, beyond.value)
+    assert 0 < beyond.value < memory.value / 2, (beyond.figure, beyond.value)
     assert beyond.figure.endswith(" MB following no robot)")
     assert row("changes timed").value >= SECONDS / 2  # the probe, with the fleet's components, once a second
     assert (
