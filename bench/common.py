@@ -151,7 +151,7 @@ def tree_proportional_bytes(pid: int) -> int:
             contextlib.suppress(OSError, ValueError),
             open(f"/proc/{member}/smaps_rollup", encoding="ascii") as rollup,
         ):
-            total += next(int(line.split()[1]) for line in rollup if line.startswith("Pss:")) * 1024
+            total += next((int(line.split()[1]) for line in rollup if line.startswith("Pss:")), 0) * 1024
     return total
 
 

@@ -1,14 +1,14 @@
 """The event history on disk: an SQLite database in WAL mode, written in batches by a thread of its own.
 
-Producers (`add`) only append to an in-memory queue under a lock; the writer thread takes everything
-queued every `FLUSH_INTERVAL_SECONDS` and inserts it in one transaction, so a busy fleet costs one
-commit a flush, not one a transition. It inserts thousands of rows a statement, not one: Python's
-sqlite3 lets go of the interpreter lock for every statement it runs, and a thread that lets go of it
-waits for it back as long as another thread keeps it busy (up to 5 ms, the switch interval), so an
-`executemany` of one row a statement wrote under 1,000 events a second while the ingest ran flat out, as it
-does when a whole fleet is first heard. A full queue drops events and counts them. Events older than the
-retention are deleted every `PRUNE_INTERVAL_SECONDS`, and the oldest go whenever the database outgrows
-its size cap (the file shrinks too: the database uses incremental auto-vacuum).
+Producers (`add`) only pack their batch and append it to an in-memory queue under a lock; the writer
+thread takes everything queued every `FLUSH_INTERVAL_SECONDS` and inserts it in one transaction, so a
+busy fleet costs one commit a flush, not one a transition. It inserts thousands of rows a statement, not
+one: Python's sqlite3 lets go of the interpreter lock for every statement it runs, and a thread that lets
+go of it waits for it back as long as another thread keeps it busy (up to 5 ms, the switch interval), so
+an `executemany` of one row a statement wrote under 1,000 events a second while the ingest ran flat out,
+as it does when a whole fleet is first heard. A full queue drops events and counts them. Events older
+than the retention are deleted every `PRUNE_INTERVAL_SECONDS`, and the oldest go whenever the database
+outgrows its size cap (the file shrinks too: the database uses incremental auto-vacuum).
 
 Each `add` waits as one block of bytes (`PackedRows`), not as the Python objects of its rows. A fleet's
 first look queues hundreds of thousands of events, one a component, while the writer falls behind. As
@@ -172,7 +172,7 @@ class EventStore:
         if self._writer is None:
             with self._queue_lock:
                 self._dropped["store_unavailable"] += packed.events
-            self._log(unpack_rows(packed.block), None)  # a log shipper still gets them
+            self._log(_unpacked([packed.block]), None)  # a log shipper still gets them
             return
         with self._queue_lock:
             room = self.settings.queue_limit - self._queued
@@ -310,7 +310,7 @@ class EventStore:
             first = _sequence(writer) if self.settings.log_events else 0
             self._insert(writer, blocks)
             writer.execute("COMMIT")
-        except sqlite3.Error as error:
+        except (sqlite3.Error, ValueError, EOFError, TypeError) as error:  # the last three: a block unpacked
             if writer.in_transaction:
                 writer.execute("ROLLBACK")
             with self._queue_lock:
@@ -325,7 +325,8 @@ class EventStore:
                     count,
                 )
             self._last_write_error = time.monotonic()
-            self._log(_unpacked(blocks), None)
+            if isinstance(error, sqlite3.Error):  # the blocks read: a log shipper still gets them
+                self._log(_unpacked(blocks), None)
             return 0
         self._writing_ok = True
         with self._queue_lock:
@@ -344,9 +345,11 @@ class EventStore:
         fields: list[Any] = []
         for block in blocks:
             fields.extend(itertools.chain.from_iterable(unpack_rows(block)))
-            while len(fields) >= full:
-                writer.execute(insert_statement(per_statement), fields[:full])
-                del fields[:full]
+            start = 0
+            while len(fields) - start >= full:
+                writer.execute(insert_statement(per_statement), fields[start : start + full])
+                start += full
+            del fields[:start]
         start = 0
         for size in _statement_sizes(len(fields) // ROW_FIELDS, per_statement):
             end = start + size * ROW_FIELDS

@@ -67,8 +67,9 @@ class Event(NamedTuple):
 
 
 # An event as the store keeps it: time, robot, kind, component, hardware_id, old level, new level, message,
-# and the key-values as a JSON list of [key, value] pairs. Plain values only: a worker sends its events to
-# the exporter's store as rows, which cross a pipe for a fraction of what named tuples holding levels cost
+# and the key-values as a JSON list of [key, value] pairs. Plain values only, of the built-in types
+# themselves (no subclass, no enum: `marshal` packs them, `pack_rows`): a worker sends its events to the
+# exporter's store as rows, which cross a pipe for a fraction of what named tuples holding levels cost
 # (pickled and read back, 1.5 µs against 8).
 EventRow = tuple[float, str, str, str | None, str | None, int | None, int | None, str, str]
 ROW_FIELDS = len(get_args(EventRow))

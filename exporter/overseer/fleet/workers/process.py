@@ -171,6 +171,13 @@ class _EventSender:
             while not self._queue.empty() and len(batch) < 10_000:
                 batch = batch + self._queue.get()
             try:
-                self._connection.send(pack_rows(event_rows(batch)))
+                packed = pack_rows(event_rows(batch))
+            except ValueError:  # a value of a type not packed: a bug, said, and the next batches go on
+                log.exception(
+                    "ingest events of a type that cannot be packed: %d events not stored", len(batch)
+                )
+                continue
+            try:
+                self._connection.send(packed)
             except (BrokenPipeError, OSError):
                 return  # the exporter is gone; the request loop ends the worker
