@@ -11,13 +11,14 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
-from typing import TextIO
+from typing import TextIO, TypeVar
 
 from testbed.paths import REPO
 
 ROW_PREFIX = "BENCH-ROW "
 _TICKS = os.sysconf("SC_CLK_TCK")
 _PAGE = os.sysconf("SC_PAGE_SIZE")
+_Number = TypeVar("_Number", int, float)
 
 
 @dataclass(frozen=True)
@@ -127,31 +128,31 @@ def process_tree(pid: int) -> list[int]:
 
 def tree_cpu_seconds(pid: int) -> float:
     """CPU time used so far by `pid` and its live descendants."""
-    total = 0.0
-    for member in process_tree(pid):
-        with contextlib.suppress(OSError, ValueError):  # it ended meanwhile
-            total += cpu_seconds(member)
-    return total
+    return _summed_over_tree(pid, cpu_seconds, 0.0)
 
 
 def tree_resident_bytes(pid: int) -> int:
     """Resident memory of `pid` and its live descendants, summed."""
-    total = 0
-    for member in process_tree(pid):
-        with contextlib.suppress(OSError, ValueError):
-            total += resident_bytes(member)
-    return total
+    return _summed_over_tree(pid, resident_bytes, 0)
 
 
 def tree_proportional_bytes(pid: int) -> int:
     """Proportional memory (PSS) of `pid` and its live descendants, summed: shared pages counted once."""
-    total = 0
+    return _summed_over_tree(pid, proportional_bytes, 0)
+
+
+def proportional_bytes(pid: int) -> int:
+    """Proportional memory (PSS) of a process: each page it shares divided among its sharers."""
+    with open(f"/proc/{pid}/smaps_rollup", encoding="ascii") as rollup:
+        return next((int(line.split()[1]) for line in rollup if line.startswith("Pss:")), 0) * 1024
+
+
+def _summed_over_tree(pid: int, measure: Callable[[int], _Number], zero: _Number) -> _Number:
+    """`measure` of `pid` and of each of its live descendants, summed."""
+    total = zero
     for member in process_tree(pid):
-        with (
-            contextlib.suppress(OSError, ValueError),
-            open(f"/proc/{member}/smaps_rollup", encoding="ascii") as rollup,
-        ):
-            total += next((int(line.split()[1]) for line in rollup if line.startswith("Pss:")), 0) * 1024
+        with contextlib.suppress(OSError, ValueError):  # it ended meanwhile
+            total += measure(member)
     return total
 
 
