@@ -339,7 +339,7 @@ class EventStore:
         return count
 
     def _insert(self, writer: sqlite3.Connection, blocks: list[bytes]) -> None:
-        """INSERT the rows packed in `blocks`, a block's objects at a time, in `_statement_sizes`' sizes."""
+        """INSERT the rows packed in `blocks`, a block at a time: full INSERTs, then `_rest_sizes`."""
         per_statement = self._rows_per_statement
         full = per_statement * ROW_FIELDS
         fields: list[Any] = []
@@ -351,7 +351,7 @@ class EventStore:
                 start += full
             del fields[:start]
         start = 0
-        for size in _statement_sizes(len(fields) // ROW_FIELDS, per_statement):
+        for size in _rest_sizes(len(fields) // ROW_FIELDS):
             end = start + size * ROW_FIELDS
             writer.execute(insert_statement(size), fields[start:end])
             start = end
@@ -391,20 +391,18 @@ def _statement_rows(connection: sqlite3.Connection) -> int:
     return max(1, min(MAX_ROWS_PER_STATEMENT, bound // ROW_FIELDS))
 
 
-def _statement_sizes(rows: int, per_statement: int) -> Iterator[int]:
-    """How many of a flush's `rows` events each INSERT writes: `per_statement`, then powers of two.
+def _rest_sizes(rows: int) -> Iterator[int]:
+    """How many of a flush's last `rows` events (fewer than a full INSERT's) each INSERT writes: powers of 2.
 
     sqlite3 keeps each INSERT text it ran prepared (128 texts a connection), about 1.2 kB an event of
     it. With one text for every length a flush's last chunk happened to have, those statements took up
     to 150 MB of the exporter's memory; the rest written as powers of two needs a dozen texts in all.
     """
-    full, rest = divmod(rows, per_statement)
-    yield from itertools.repeat(per_statement, full)
-    size = 1 << max(rest.bit_length() - 1, 0)
-    while rest:
-        if size <= rest:
+    size = 1 << max(rows.bit_length() - 1, 0)
+    while rows:
+        if size <= rows:
             yield size
-            rest -= size
+            rows -= size
         size >>= 1
 
 
