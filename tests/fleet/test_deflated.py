@@ -11,7 +11,15 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from overseer.fleet import deflated
-from overseer.fleet.deflated import Deflated, deflate, gzip_member, inflate, join
+from overseer.fleet.deflated import (
+    Deflated,
+    deflate,
+    gzip_member,
+    gzip_member_strings,
+    inflate,
+    inflate_in_slices,
+    join,
+)
 from support.rendering import gunzip_one_member
 
 
@@ -101,7 +109,7 @@ def test_checksums_combine_as_zlib_computes_the_whole(size2: int) -> None:
     assert deflated.crc32_combine(crc1, crc2, size2) == combined
 
 
-@pytest.mark.parametrize(
+DAMAGES = pytest.mark.parametrize(
     "damage",
     [
         lambda piece: piece._replace(size=piece.size + 1),
@@ -113,12 +121,41 @@ def test_checksums_combine_as_zlib_computes_the_whole(size2: int) -> None:
     ],
     ids=["claims more", "claims less", "cut short", "no sync marker", "final block", "not deflate"],
 )
+
+
+@DAMAGES
 def test_a_piece_that_does_not_hold_its_length_is_refused(
     implementation: str, damage: Callable[[Deflated], Deflated]
 ) -> None:
     piece = deflate(b"".join(texts(5)))
     with pytest.raises(ValueError, match="inflate"):
         inflate(damage(piece))
+
+
+@DAMAGES
+def test_a_piece_inflated_in_slices_is_refused_as_whole(damage: Callable[[Deflated], Deflated]) -> None:
+    piece = deflate(b"".join(texts(5)))
+    assert piece.size > 256
+    with pytest.raises(ValueError, match="inflate"):
+        b"".join(inflate_in_slices(damage(piece), most=256))
+
+
+def test_a_large_piece_is_inflated_in_slices_of_at_most_the_bound(implementation: str) -> None:
+    text = b"".join(texts(300, seed=5)) * 3
+    slices = list(inflate_in_slices(deflate(text), most=1 << 16))
+    assert b"".join(slices) == text
+    assert len(slices) >= len(text) >> 16
+    assert max(map(len, slices)) <= 1 << 16
+    assert list(inflate_in_slices(deflate(b"short"), most=1 << 16)) == [b"short"]
+
+
+def test_a_gzip_member_is_written_as_its_pieces_data_not_copied(implementation: str) -> None:
+    pieces = [deflate(text) for text in texts(20)]
+    strings = gzip_member_strings(pieces)
+    assert b"".join(strings) == gzip_member(pieces)
+    assert gunzip_one_member(b"".join(strings)) == b"".join(texts(20))
+    kept = {id(piece.data) for piece in pieces if piece.size}
+    assert kept <= {id(string) for string in strings}
 
 
 def test_the_compiled_deflater_keeps_the_interpreter_lock_where_pythons_zlib_lets_go() -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from typing import NamedTuple
 
 try:
@@ -32,6 +32,9 @@ MEMORY_LEVEL = 5
 _GZIP_HEADER = b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x00\xff"  # deflate, no name, no time, unknown system
 _LAST_BLOCK = zlib.compressobj(LEVEL, zlib.DEFLATED, -WINDOW_BITS).flush()  # an empty final block
 _TRAILER = struct.Struct("<II")
+# A piece is inflated this much at a time when its text is to be written out rather than kept: a worker's
+# family of lines at 10,000 robots is tens of megabytes of text.
+SLICE_BYTES = 1 << 20
 
 
 class Deflated(NamedTuple):
@@ -55,6 +58,12 @@ def deflate(text: bytes) -> Deflated:
 
 def join(pieces: Iterable[Deflated]) -> Deflated:
     """The pieces, in order, as one piece (no byte is compressed again)."""
+    data, crc, size = _laid_end_to_end(pieces)
+    return Deflated(b"".join(data), crc, size)
+
+
+def _laid_end_to_end(pieces: Iterable[Deflated]) -> tuple[list[bytes], int, int]:
+    """The pieces' data in order (empty pieces left out), and the CRC-32 and length of their texts."""
     data: list[bytes] = []
     crc = size = 0
     combine = crc32_combine
@@ -63,7 +72,7 @@ def join(pieces: Iterable[Deflated]) -> Deflated:
             data.append(piece.data)
             crc = combine(crc, piece.crc, piece.size)
             size += piece.size
-    return Deflated(b"".join(data), crc, size)
+    return data, crc, size
 
 
 def inflate(piece: Deflated) -> bytes:
@@ -73,9 +82,44 @@ def inflate(piece: Deflated) -> bytes:
 
 def gzip_member(pieces: Iterable[Deflated]) -> bytes:
     """The pieces' text, in order, as one gzip member (what a `Content-Encoding: gzip` body is)."""
-    whole = join(pieces)
-    trailer = _TRAILER.pack(whole.crc, whole.size & 0xFFFFFFFF)
-    return b"".join((_GZIP_HEADER, whole.data, _LAST_BLOCK, trailer))
+    return b"".join(gzip_member_strings(pieces))
+
+
+def gzip_member_strings(pieces: Iterable[Deflated]) -> list[bytes]:
+    """`gzip_member(pieces)` as the byte strings it is made of, in order: the pieces' data not copied."""
+    data, crc, size = _laid_end_to_end(pieces)
+    return [_GZIP_HEADER, *data, _LAST_BLOCK, _TRAILER.pack(crc, size & 0xFFFFFFFF)]
+
+
+def inflate_in_slices(piece: Deflated, most: int = SLICE_BYTES) -> Iterator[bytes]:
+    """The text of `piece` in slices of at most `most` bytes, for writing out; ValueError as `inflate`.
+
+    A piece of `most` bytes of text or less is inflated at once (checked before its text is given); a
+    larger one a slice at a time, checked as its last slice is read: its text is written out as it
+    comes, and never held whole.
+    """
+    if piece.size <= most:
+        yield inflate(piece)
+        return
+    reader = zlib.decompressobj(-zlib.MAX_WBITS)
+    given = 0
+    text = _inflated(reader, piece.data, most)
+    while text:
+        given += len(text)
+        if given > piece.size:
+            break
+        yield text
+        text = _inflated(reader, reader.unconsumed_tail, most)
+    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
+    if given != piece.size or reader.eof or reader.unconsumed_tail or not piece.data.endswith(_SYNC_MARKER):
+        raise ValueError(f"inflate: the data does not hold the {piece.size} bytes of text it should")
+
+
+def _inflated(reader: zlib._Decompress, data: bytes, most: int) -> bytes:
+    try:
+        return reader.decompress(data, most)
+    except zlib.error as error:
+        raise ValueError(f"inflate: {error}") from None
 
 
 def deflate_in_python(text: bytes) -> tuple[bytes, int]:

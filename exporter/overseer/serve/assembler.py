@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import functools
 from collections import Counter
-from collections.abc import Iterable, Sequence
-from typing import Protocol
+from collections.abc import Iterable, Iterator, Sequence
+from typing import NamedTuple, Protocol
 
 from prometheus_client.registry import Collector, CollectorRegistry
 
 from overseer import __version__
 from overseer.codec import compiled
 from overseer.fleet import metric_families as contract
-from overseer.fleet.deflated import Deflated, deflate, gzip_member, inflate
+from overseer.fleet.deflated import Deflated, deflate, gzip_member_strings, inflate_in_slices
 from overseer.fleet.exposition import ExpositionPart, escape_label_value, go_float
 from overseer.fleet.metric_families import MetricFamily
 from overseer.fleet.metric_values import DROP_REASONS, message_counts
@@ -61,17 +61,30 @@ class ExpositionAssembler:
 
     def assemble(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> bytes:
         """The exposition in `fmt`: each family's header, then every part's lines of it; then the rest."""
-        body: list[bytes] = []
-        for index, family in enumerate(contract.FLEET_FAMILIES):
-            body.append(fmt.header(family).encode())
-            body.extend(inflate(part.families[index]) for part in parts)
-        body.append(self._rest(parts, fmt))
-        body.extend(families.text(fmt) for families in self._rendered)
-        body.append(fmt.end)
-        return b"".join(body)  # joined once: no copy of the whole body on the way
+        return b"".join(self.text_body(parts, fmt).strings)
 
     def assemble_gzip(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> bytes:
         """`assemble`'s answer gzipped, from the parts' deflated lines as they are: only the rest is new."""
+        return b"".join(self.gzip_body(parts, fmt).strings)
+
+    def text_body(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> Body:
+        """`assemble`'s answer to be written out as it is inflated, a slice at a time, never whole.
+
+        At 10,000 robots the text is 170 MB: held whole, it would more than double the exporter's memory
+        for every scrape that does not take gzip.
+        """
+        texts: list[bytes | Deflated] = []
+        for index, family in enumerate(contract.FLEET_FAMILIES):
+            texts.append(fmt.header(family).encode())
+            texts.extend(part.families[index] for part in parts)
+        texts.append(self._rest(parts, fmt))
+        texts.extend(families.text(fmt) for families in self._rendered)
+        texts.append(fmt.end)
+        length = sum(len(text) if isinstance(text, bytes) else text.size for text in texts)
+        return Body(length, _inflated_in_turn(texts))
+
+    def gzip_body(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat = TEXT) -> Body:
+        """`assemble_gzip`'s answer as the strings it is made of: the parts' deflated lines not copied."""
         pieces: list[Deflated] = []
         for index, family in enumerate(contract.FLEET_FAMILIES):
             pieces.append(_deflated_header(family, fmt))
@@ -79,7 +92,8 @@ class ExpositionAssembler:
         pieces.append(deflate(self._rest(parts, fmt)))
         pieces.extend(families.deflated(fmt) for families in self._rendered)
         pieces.append(_deflated_end(fmt))
-        return gzip_member(pieces)
+        strings = gzip_member_strings(pieces)
+        return Body(sum(map(len, strings)), iter(strings))
 
     def _rest(self, parts: Sequence[ExpositionPart], fmt: ExpositionFormat) -> bytes:
         """What follows the fleet's families: the exporter's own, the extra collectors'."""
@@ -126,6 +140,21 @@ class ExpositionAssembler:
         lines.append(fmt.header(contract.WEB_INFO))
         lines.append(self._web_info)
         return "".join(lines)
+
+
+class Body(NamedTuple):
+    """An answer's body: its length in bytes, and the byte strings to write one after the other."""
+
+    length: int
+    strings: Iterator[bytes]
+
+
+def _inflated_in_turn(texts: Iterable[bytes | Deflated]) -> Iterator[bytes]:
+    for text in texts:
+        if isinstance(text, bytes):
+            yield text
+        else:
+            yield from inflate_in_slices(text)
 
 
 @functools.cache

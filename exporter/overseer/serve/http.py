@@ -28,7 +28,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
 from overseer.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.api_query import ApiQueryError, parse_component_query, parse_robot_query
-from overseer.serve.assembler import ExpositionAssembler
+from overseer.serve.assembler import Body, ExpositionAssembler
 from overseer.serve.negotiation import accepts_gzip, negotiate_format
 from overseer.serve.render_timing import RenderTiming
 from overseer.serve.status_page import FAVICON, PAGE_HEADERS, STATIC_PREFIX, PageFile, load_page_files
@@ -362,11 +362,12 @@ class _Handler(BaseHTTPRequestHandler):
         self.server.on_scrape(f"{self.client_address[0]} {self.headers.get('User-Agent', '')}")
         fmt = negotiate_format(self.headers.get("Accept"))
         parts = self.server.render_timing.timed(self.server.fleet.exposition_parts)
+        # Written as the strings it is made of: joined, a 10,000-robot answer would be held twice over.
         if accepts_gzip(self.headers.get("Accept-Encoding")):
-            body = self.server.assembler.assemble_gzip(parts, fmt)
-            self._send(200, body, fmt.content_type, head_only, encoding="gzip")
+            body = self.server.assembler.gzip_body(parts, fmt)
+            self._send_body(200, body, fmt.content_type, head_only, encoding="gzip")
         else:
-            self._send(200, self.server.assembler.assemble(parts, fmt), fmt.content_type, head_only)
+            self._send_body(200, self.server.assembler.text_body(parts, fmt), fmt.content_type, head_only)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:
         body = json.dumps(document, ensure_ascii=False, allow_nan=False).encode("utf-8")
@@ -383,13 +384,25 @@ class _Handler(BaseHTTPRequestHandler):
         encoding: str | None = None,
     ) -> None:
         """Answer `body`; gzipped here when `compressible` and the client takes it, or already `encoding`."""
-        self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
         if compressible and encoding is None and accepts_gzip(self.headers.get("Accept-Encoding")):
             body = gzip.compress(body, compresslevel=1)
             encoding = "gzip"
+        self._send_body(status, Body(len(body), iter((body,))), content_type, head_only, extra, encoding)
+
+    def _send_body(
+        self,
+        status: int,
+        body: Body,
+        content_type: str,
+        head_only: bool = False,
+        extra: tuple[tuple[str, str], ...] = (),
+        encoding: str | None = None,
+    ) -> None:
+        """Answer `body`'s strings, one after the other, already `encoding` when said."""
+        self._stream.deadline = time.monotonic() + REQUEST_TIMEOUT_SECONDS
         self.send_response(status)
         self.send_header("Content-Type", content_type)
-        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Content-Length", str(body.length))
         if encoding:
             self.send_header("Content-Encoding", encoding)
         self.send_header("Cache-Control", "no-store")
@@ -397,7 +410,8 @@ class _Handler(BaseHTTPRequestHandler):
             self.send_header(name, value)
         self.end_headers()
         if not head_only:
-            self.wfile.write(body)
+            for string in body.strings:
+                self.wfile.write(string)
 
     def end_headers(self) -> None:
         for name, value in self.server.security.headers:
