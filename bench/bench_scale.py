@@ -82,7 +82,7 @@ from overseer.config.ingest import MAX_INGEST_WORKERS
 from overseer.model.state import FleetLimits
 from testbed.browser import headless_chromium
 from testbed.ports import fresh_domain_id
-from testbed.processes import RunningProcess, running_exporter
+from testbed.processes import Exporter, RunningProcess, running_exporter
 from testbed.prometheus import Prometheus, running_prometheus, shipped_config
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
@@ -205,13 +205,21 @@ def floor_counter(wires: Wiring, directory: Path, wanted: bool) -> Iterator[Coun
 
 
 def scrape_against_floor(
-    exporter_url: str, directory: Path, seconds: float, interval: int, pieces: bool = False
+    exporter: Exporter,
+    components: int,
+    directory: Path,
+    seconds: float,
+    interval: int,
+    pieces: bool = False,
 ) -> list[Row]:
     """Prometheus scraping the exporter and a static copy of its bytes for `seconds`: its own durations.
 
+    Meanwhile the exporter's memory (its `components` following) is read every second: a scrape takes
+    memory of its own, which the figures read before and after Prometheus would not show.
     With `pieces`, a third static server answers the same text gzipped as the exporter does (its robots'
     deflated pieces end to end, where the floor's is one gzip stream): what the pieces cost Prometheus.
     """
+    exporter_url = exporter.url
     gzipped, content_type = fetch(exporter_url + "/metrics", PROMETHEUS_ACCEPT, "gzip")
     body = gzip.decompress(gzipped)
     with (
@@ -225,7 +233,7 @@ def scrape_against_floor(
             "scrape_configs": [{"job_name": job, "static_configs": [{"targets": [t]}]} for job, t in jobs],
         }
         with running_prometheus(directory, config) as prometheus:
-            time.sleep(seconds)
+            scraped_rss = highest_tree_resident(exporter.process.pid, time.monotonic() + seconds)
             ours = scrape_durations(prometheus, "overseer", seconds)
             floors = scrape_durations(prometheus, "floor", seconds)
             pieces_floors = scrape_durations(prometheus, "floor_pieces", seconds) if pieces else []
@@ -302,6 +310,14 @@ def scrape_against_floor(
         ),
         Row("scale", "Prometheus: scrapes measured, exporter / floor", len(ours), f"/ {len(floors)}"),
         Row("scale", "Prometheus: exporter scrapes failed", failed, "scrapes", "0", failed == 0),
+        Row(
+            "scale",
+            "Prometheus: the exporter's memory a component, the most while scraped (read every second)",
+            scraped_rss / components,
+            "bytes",
+            f"<= {MEMORY_TARGET}",
+            scraped_rss / components <= MEMORY_TARGET,
+        ),
         Row("scale", "Prometheus: its CPU since it started", prometheus_cpu, "% of a core"),
         Row("scale", "Prometheus: its resident memory", prometheus_memory / 1e6, "MB"),
     ]
@@ -481,7 +497,12 @@ def run(
                 if prometheus_seconds:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
                     prometheus_rows = scrape_against_floor(
-                        exporter.url, Path(tmp), prometheus_seconds, interval, floor_pieces
+                        exporter,
+                        robots * shape.components,
+                        Path(tmp),
+                        prometheus_seconds,
+                        interval,
+                        floor_pieces,
                     )
                     if rules:
                         prometheus_rows += shipped_rules_rows(
