@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import random
 import threading
+import tracemalloc
 import zlib
 from collections.abc import Callable, Iterator
 
@@ -147,6 +148,25 @@ def test_a_large_piece_is_inflated_in_slices_of_at_most_the_bound(implementation
     assert len(slices) >= len(text) >> 16
     assert max(map(len, slices)) <= 1 << 16
     assert list(inflate_in_slices(deflate(b"short"), most=1 << 16)) == [b"short"]
+
+
+def test_a_large_piece_is_inflated_without_holding_its_text_or_a_copy_of_its_data() -> None:
+    piece = deflate(b"".join(texts(300, seed=5)) * 8)
+    assert len(piece.data) > 2 << 20
+    tracemalloc.start()
+    try:
+        given = sum(len(text) for text in inflate_in_slices(piece, most=1 << 16))
+        _, most = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert given == piece.size
+    # Handing zlib what it left over each time copied the rest of the data: 2 copies at most alive.
+    assert most < 1 << 20, f"{most / 1e6:.1f} MB allocated inflating {len(piece.data) / 1e6:.1f} MB of data"
+
+
+def test_slices_of_no_bytes_are_refused() -> None:
+    with pytest.raises(ValueError, match="at least one byte"):
+        list(inflate_in_slices(deflate(b"text"), most=0))
 
 
 def test_a_gzip_member_is_written_as_its_pieces_data_not_copied(implementation: str) -> None:

@@ -35,6 +35,7 @@ _TRAILER = struct.Struct("<II")
 # A piece is inflated this much at a time when its text is to be written out rather than kept: a worker's
 # family of lines at 10,000 robots is tens of megabytes of text.
 SLICE_BYTES = 1 << 20
+_FEED_BYTES = 1 << 16  # a large piece's data handed to zlib at a time: zlib copies what it leaves over
 
 
 class Deflated(NamedTuple):
@@ -95,31 +96,37 @@ def inflate_in_slices(piece: Deflated, most: int = SLICE_BYTES) -> Iterator[byte
     """The text of `piece` in slices of at most `most` bytes, for writing out; ValueError as `inflate`.
 
     A piece of `most` bytes of text or less is inflated at once (checked before its text is given); a
-    larger one a slice at a time, checked as its last slice is read: its text is written out as it
-    comes, and never held whole.
+    larger one a slice at a time from its data read 64 kB at a time, and checked as its last slice is
+    read: neither its text nor a copy of its data is ever held whole, and what was given before a
+    damage is found stays given.
     """
+    if most <= 0:
+        raise ValueError(f"inflate: slices of at least one byte, not {most}")
     if piece.size <= most:
         yield inflate(piece)
         return
     reader = zlib.decompressobj(-zlib.MAX_WBITS)
+    data = memoryview(piece.data)
     given = 0
-    text = _inflated(reader, piece.data, most)
-    while text:
-        given += len(text)
-        if given > piece.size:
-            break
-        yield text
-        text = _inflated(reader, reader.unconsumed_tail, most)
-    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
-    if given != piece.size or reader.eof or reader.unconsumed_tail or not piece.data.endswith(_SYNC_MARKER):
-        raise ValueError(f"inflate: the data does not hold the {piece.size} bytes of text it should")
-
-
-def _inflated(reader: zlib._Decompress, data: bytes, most: int) -> bytes:
     try:
-        return reader.decompress(data, most)
+        for start in range(0, len(data), _FEED_BYTES):
+            pending: bytes | memoryview = data[start : start + _FEED_BYTES]
+            while True:
+                # Zlib keeps what did not fit in `most` for the next call, even of no more data.
+                text = reader.decompress(pending, most)
+                pending = reader.unconsumed_tail
+                given += len(text)
+                if given > piece.size:
+                    raise ValueError(f"inflate: the data holds more than the {piece.size} bytes it should")
+                if text:
+                    yield text
+                if not pending and len(text) < most:
+                    break
     except zlib.error as error:
         raise ValueError(f"inflate: {error}") from None
+    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
+    if given != piece.size or reader.eof or not piece.data.endswith(_SYNC_MARKER):
+        raise ValueError(f"inflate: the data does not hold the {piece.size} bytes of text it should")
 
 
 def deflate_in_python(text: bytes) -> tuple[bytes, int]:
