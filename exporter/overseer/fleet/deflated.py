@@ -124,9 +124,7 @@ def inflate_in_slices(piece: Deflated, most: int = SLICE_BYTES) -> Iterator[byte
                     break
     except zlib.error as error:
         raise ValueError(f"inflate: {error}") from None
-    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
-    if given != piece.size or reader.eof or not piece.data.endswith(_SYNC_MARKER):
-        raise ValueError(f"inflate: the data does not hold the {piece.size} bytes of text it should")
+    _refuse_unless_whole(given, piece.size, reader, piece.data)
 
 
 def deflate_in_python(text: bytes) -> tuple[bytes, int]:
@@ -142,10 +140,15 @@ def inflate_in_python(data: bytes, size: int) -> bytes:
         text = reader.decompress(data, size + 1)
     except zlib.error as error:
         raise ValueError(f"inflate: {error}") from None
-    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
-    if len(text) != size or reader.eof or reader.unconsumed_tail or not data.endswith(_SYNC_MARKER):
-        raise ValueError(f"inflate: the data does not hold the {size} bytes of text it should")
+    _refuse_unless_whole(len(text), size, reader, data)
     return text
+
+
+def _refuse_unless_whole(given: int, size: int, reader: zlib._Decompress, data: bytes) -> None:
+    """ValueError unless `reader` gave all `size` bytes of `data`'s text, and the piece would join."""
+    # Whole, and joinable: no final block, and ending in a sync flush's empty stored block.
+    if given != size or reader.eof or reader.unconsumed_tail or not data.endswith(_SYNC_MARKER):
+        raise ValueError(f"inflate: the data does not hold the {size} bytes of text it should")
 
 
 _SYNC_MARKER = b"\x00\x00\xff\xff"
