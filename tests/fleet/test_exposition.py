@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from overseer.config.metrics import MESSAGE_LABEL_MODES
+from overseer.config.metrics import MESSAGE_LABEL_MODES, NO_VALUE_KEYS
 from overseer.fleet import exposition as exposition_module
 from overseer.fleet.deflated import Deflated, inflate
 from overseer.fleet.message_labels import MessageLabels
@@ -129,10 +129,12 @@ def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     assert all(rendering.exposition._robots[name] is lines for name, lines in cached.items())
 
 
-def three_components_rendered(level: int) -> tuple[Rendering, Callable[[], None], Callable[[], None]]:
+def three_components_rendered(
+    level: int, value_keys: str = ".*"
+) -> tuple[Rendering, Callable[[], None], Callable[[], None]]:
     """Robot9 of three components at `level`, rendered once; what changes its second's value; its level."""
     model, _ = fleet()
-    rendering = Rendering(model)
+    rendering = Rendering(model, value_keys)
     three = tuple(DiagnosticStatus(level, f"/c{i}", "warm", "", (("v", str(i)),)) for i in range(3))
     model.apply("robot9", DiagnosticArray(0, 0, "", three), "dds")
     rendering.fast()
@@ -191,6 +193,33 @@ def test_a_changed_value_renders_only_its_components_values_and_copies_the_rest(
     assert after.levels is before.levels and after.changes is before.changes
     assert after.messages is before.messages and after.values != before.values
     assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and rendered == [("values", 1)]
+
+
+def test_with_no_value_exported_a_changed_value_renders_and_inflates_nothing(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # `metrics.value_keys: []`, the setting a large fleet is advised: its values change all the time.
+    rendering, change_a_value, change_a_level = three_components_rendered(1, NO_VALUE_KEYS)
+    before = rendering.exposition._robots["robot9"]
+    rendered, inflated = record_rendering(monkeypatch)
+    change_a_value()
+    fast, reference = rendering.both(TEXT)
+    assert fast == reference
+    after = rendering.exposition._robots["robot9"]
+    assert rendered == [] and inflated == []
+    assert after is not before and after.signature != before.signature  # the new revision's
+    assert [after.levels, after.changes, after.values, after.messages] == [
+        before.levels,
+        before.changes,
+        before.values,
+        before.messages,
+    ]
+    assert after.levels is before.levels and after.messages is before.messages
+    change_a_level()  # a level still renders, its values none
+    fast, reference = rendering.both(TEXT)
+    assert fast == reference
+    assert sorted(rendered) == [("changes", 1), ("level", 1), ("message", 1), ("values", 1)]
+    assert b'ros_diagnostics_level{component="/c1",hardware_id="",robot="robot9"} 2.0' in fast
 
 
 def test_a_changed_level_renders_its_components_level_changes_and_message_lines(

@@ -49,6 +49,9 @@ OPTIONS: tuple[Option, ...] = (
 KEYS = {entry.key.partition(".")[2] for entry in OPTIONS}
 
 
+NO_VALUE_KEYS = "(?!)"  # the pattern of `value_keys: []`, which no key matches: no value is exported
+
+
 @dataclass(frozen=True)
 class MetricsConfig:
     """What the /metrics view exports beyond levels."""
@@ -66,7 +69,7 @@ class MetricsConfig:
     @property
     def value_key_pattern(self) -> re.Pattern[str]:
         """One compiled pattern matching every allowed key-value key in full."""
-        return re.compile("|".join(f"(?:{p})" for p in self.value_keys) or "(?!)")
+        return re.compile("|".join(f"(?:{p})" for p in self.value_keys) or NO_VALUE_KEYS)
 
 
 def metrics_config(raw: dict[str, Any]) -> MetricsConfig:

@@ -24,6 +24,7 @@ from typing import cast
 
 from prometheus_client.utils import floatToGoString
 
+from overseer.config.metrics import NO_VALUE_KEYS
 from overseer.fleet.deflated import Deflated, deflate, inflate, join
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.fleet.metric_values import NumericValues
@@ -105,7 +106,12 @@ class FleetExposition:
             return self._render(self._model.snapshot())
 
     def _render(self, snapshot: FleetSnapshot) -> ExpositionPart:
-        render = _RenderCache(NumericValues(self._value_keys), self._messages, self._level_changes)
+        render = _RenderCache(
+            NumericValues(self._value_keys),
+            self._value_keys.pattern != NO_VALUE_KEYS,
+            self._messages,
+            self._level_changes,
+        )
         previous, current = self._robots, {}
         levels, changes, values, messages = [], [], [], []
         robot_level, robot_up, last_message, periods, info = [], [], [], [], []
@@ -194,9 +200,29 @@ def _lines_for(
     missing = robot.missing
     levels = snapshot.component_levels(robot, up)
     judged = bytes(levels)
-    items = list(robot.components.items())
-    lines = _ComponentLines(items, levels, f'robot="{render.escape(robot.name)}"', render)
     stamps = _stamps(robot.components, missing)
+    robot_label = f'robot="{render.escape(robot.name)}"'
+    info = _info_line(robot, render.escape) if cached is None or not same_revision else cached.info
+    robot_changes = _ROBOT_CHANGES.format(robot_label, render.number(robot.level_changes)).encode()
+    if copyable is not None and _renders_alike(copyable, stamps, judged, render.exports_values):
+        # Most often values changed that are not exported (`metrics.value_keys: []`): nothing to render.
+        return _RobotLines(
+            signature,
+            timing,
+            copyable.robot_level,
+            info,
+            copyable.counts,
+            robot_changes,
+            copyable.levels,
+            copyable.changes,
+            copyable.values,
+            copyable.messages,
+            stamps,
+            judged,
+            copyable.offsets,
+        )
+    items = list(robot.components.items())
+    lines = _ComponentLines(items, levels, robot_label, render)
     to_render = (
         _lines_to_render(copyable.stamps, copyable.component_levels, stamps, judged)
         if copyable is not None
@@ -213,9 +239,9 @@ def _lines_for(
         signature,
         timing,
         worst(levels) if up else Level.STALE,
-        _info_line(robot, render.escape) if cached is None or not same_revision else cached.info,
-        _counts_lines(lines.robot_label, levels, render.number),
-        _ROBOT_CHANGES.format(lines.robot_label, render.number(robot.level_changes)).encode(),
+        info,
+        _counts_lines(robot_label, levels, render.number),
+        robot_changes,
         levels_lines,
         changes,
         values,
@@ -255,6 +281,21 @@ def _stamps(components: Mapping[ComponentKey, Component], missing: frozenset[Com
                 stamps[index] = _MISSING
     stamps.frombytes(field_hashes(records, _VALUES))
     return stamps
+
+
+def _renders_alike(cached: _RobotLines, stamps: array[int], levels: bytes, values: bool) -> bool:
+    """Whether every line the robot's components render is as `cached` (copyable) has them.
+
+    So it is when the same components, at the same levels, have the same stamps, values aside when no
+    value is exported (every value line is then empty), and none is missing from its feed's message.
+    """
+    count = len(levels)
+    if levels != cached.component_levels or len(stamps) != len(cached.stamps):
+        return False
+    firsts = stamps[:count]
+    if firsts != cached.stamps[:count] or _MISSING in firsts:
+        return False
+    return not values or stamps[count:] == cached.stamps[count:]
 
 
 def _lines_to_render(
@@ -401,8 +442,10 @@ class _ComponentLines:
 
     def values(self, index: int) -> bytes:
         """Its ros_diagnostics_value lines, one per exported numeric value."""
-        component = self._items[index][1]
         render = self._render
+        if not render.exports_values:
+            return b""
+        component = self._items[index][1]
         pairs = list(render.numbers.pairs(component.values))
         if not pairs:  # most components: no value exported
             return b""
@@ -466,8 +509,11 @@ def _status_message_line(identity: str, level: Level, message: str, robot_label:
 class _RenderCache:
     """Memoized escaping and number formatting for one render."""
 
-    def __init__(self, numbers: NumericValues, messages: MessageLabels, level_changes: bool) -> None:
+    def __init__(
+        self, numbers: NumericValues, exports_values: bool, messages: MessageLabels, level_changes: bool
+    ) -> None:
         self.numbers = numbers
+        self.exports_values = exports_values  # False: no key is exported (`NO_VALUE_KEYS`)
         self.level_changes = level_changes
         self._message_length = messages.length
         # MessageLabels.wants, inlined (it runs for every component rendered); the tests hold them equal.
