@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from overseer.config.metrics import MESSAGE_LABEL_MODES, NO_VALUE_KEYS
+from overseer.config.metrics import MESSAGE_LABEL_MODES, NO_VALUE_KEYS, metrics_config
 from overseer.fleet import exposition as exposition_module
 from overseer.fleet.deflated import Deflated, inflate
 from overseer.fleet.message_labels import MessageLabels
@@ -195,11 +195,14 @@ def test_a_changed_value_renders_only_its_components_values_and_copies_the_rest(
     assert rendering.fast(OPENMETRICS) == rendering.oracle(OPENMETRICS) and rendered == [("values", 1)]
 
 
+@pytest.mark.parametrize("value_keys", [[], [NO_VALUE_KEYS]], ids=["file: []", "command line: '(?!)'"])
 def test_with_no_value_exported_a_changed_value_renders_and_inflates_nothing(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, value_keys: list[str]
 ) -> None:
-    # `metrics.value_keys: []`, the setting a large fleet is advised: its values change all the time.
-    rendering, change_a_value, change_a_level = three_components_rendered(1, NO_VALUE_KEYS)
+    # The setting a large fleet is advised, in the configuration file or on the command line (where a
+    # repeated option cannot be given no value): its values change all the time.
+    pattern = metrics_config({"value_keys": value_keys}).value_key_pattern.pattern
+    rendering, change_a_value, change_a_level = three_components_rendered(1, pattern)
     before = rendering.exposition._robots["robot9"]
     rendered, inflated = record_rendering(monkeypatch)
     change_a_value()

@@ -16,7 +16,8 @@ OPTIONS: tuple[Option, ...] = (
     option(
         "metrics.value_keys",
         ".*",
-        "a regular expression (full match) of the key-value keys exported as numbers; repeat for several",
+        "a regular expression (full match) of the key-value keys exported as numbers; repeat for several; "
+        "`[]` (on the command line `'(?!)'`) exports none",
         kind="repeated",
         metavar="REGEX",
         flag="--metrics.value-key",
@@ -69,7 +70,10 @@ class MetricsConfig:
     @property
     def value_key_pattern(self) -> re.Pattern[str]:
         """One compiled pattern matching every allowed key-value key in full."""
-        return re.compile("|".join(f"(?:{p})" for p in self.value_keys) or NO_VALUE_KEYS)
+        # `NO_VALUE_KEYS` given as a key (`--metrics.value-key='(?!)'`, the command line's "none") stays
+        # itself, so that the exposition knows no value is exported.
+        keys = [f"(?:{p})" for p in self.value_keys if p != NO_VALUE_KEYS]
+        return re.compile("|".join(keys) or NO_VALUE_KEYS)
 
 
 def metrics_config(raw: dict[str, Any]) -> MetricsConfig:

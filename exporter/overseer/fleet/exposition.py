@@ -54,8 +54,9 @@ class _RobotLines:
     were rendered from, two a component (`_stamps`), and `component_levels` their levels as rendered:
     a component with the same stamps renders the same lines (when the robot's up, timing and staleness
     did not change), so they are copied instead, and one whose values alone changed renders its values
-    again. The records themselves are not kept: a fleet scraped a minute apart replaces nearly half of
-    them meanwhile, and the cache would keep each old one alive (about 400 bytes) beside the new.
+    again (none when no value is exported: `_renders_alike`). The records themselves are not kept: a
+    fleet scraped a minute apart replaces nearly half of them meanwhile, and the cache would keep each
+    old one alive (about 400 bytes) beside the new.
     """
 
     signature: tuple[tuple[int, float], bool, tuple[int, ...]]
