@@ -54,7 +54,7 @@ class _RobotLines:
     were rendered from, two a component (`_stamps`), and `component_levels` their levels as rendered:
     a component with the same stamps renders the same lines (when the robot's up, timing and staleness
     did not change), so they are copied instead, and one whose values alone changed renders its values
-    again (none when no value is exported: `_renders_alike`). The records themselves are not kept: a
+    again (none when no value is exported: `_lines_to_render`). The records themselves are not kept: a
     fleet scraped a minute apart replaces nearly half of them meanwhile, and the cache would keep each
     old one alive (about 400 bytes) beside the new.
     """
@@ -96,6 +96,7 @@ class FleetExposition:
         """
         self._model = model
         self._value_keys = value_keys
+        self._exports_values = value_keys.pattern != NO_VALUE_KEYS
         self._messages = messages
         self._level_changes = level_changes
         self._robots: dict[str, _RobotLines] = {}
@@ -109,7 +110,7 @@ class FleetExposition:
     def _render(self, snapshot: FleetSnapshot) -> ExpositionPart:
         render = _RenderCache(
             NumericValues(self._value_keys),
-            self._value_keys.pattern != NO_VALUE_KEYS,
+            self._exports_values,
             self._messages,
             self._level_changes,
         )
@@ -205,8 +206,14 @@ def _lines_for(
     robot_label = f'robot="{render.escape(robot.name)}"'
     info = _info_line(robot, render.escape) if cached is None or not same_revision else cached.info
     robot_changes = _ROBOT_CHANGES.format(robot_label, render.number(robot.level_changes)).encode()
-    if copyable is not None and _renders_alike(copyable, stamps, judged, render.exports_values):
-        # Most often values changed that are not exported (`metrics.value_keys: []`): nothing to render.
+    to_render = (
+        _lines_to_render(copyable.stamps, copyable.component_levels, stamps, judged, render.exports_values)
+        if copyable is not None
+        else (list(range(len(judged))),) * FAMILIES
+    )
+    if copyable is not None and not any(to_render) and len(stamps) == len(copyable.stamps):
+        # Nothing to render in any family (most often values changed that are not exported,
+        # `metrics.value_keys: []`): the robot's lines are the cached ones.
         return _RobotLines(
             signature,
             timing,
@@ -224,11 +231,6 @@ def _lines_for(
         )
     items = list(robot.components.items())
     lines = _ComponentLines(items, levels, robot_label, render)
-    to_render = (
-        _lines_to_render(copyable.stamps, copyable.component_levels, stamps, judged)
-        if copyable is not None
-        else (list(range(len(items))),) * FAMILIES
-    )
     offsets: array[int] = array("I")
     levels_lines, changes, values, messages = (
         _family_lines(cached, family, indices, len(items), render_line, offsets)
@@ -284,23 +286,8 @@ def _stamps(components: Mapping[ComponentKey, Component], missing: frozenset[Com
     return stamps
 
 
-def _renders_alike(cached: _RobotLines, stamps: array[int], levels: bytes, values: bool) -> bool:
-    """Whether every line the robot's components render is as `cached` (copyable) has them.
-
-    So it is when the same components, at the same levels, have the same stamps, values aside when no
-    value is exported (every value line is then empty), and none is missing from its feed's message.
-    """
-    count = len(levels)
-    if levels != cached.component_levels or len(stamps) != len(cached.stamps):
-        return False
-    firsts = stamps[:count]
-    if firsts != cached.stamps[:count] or _MISSING in firsts:
-        return False
-    return not values or stamps[count:] == cached.stamps[count:]
-
-
 def _lines_to_render(
-    reusable: array[int], reusable_levels: bytes, stamps: array[int], levels: bytes
+    reusable: array[int], reusable_levels: bytes, stamps: array[int], levels: bytes, values: bool
 ) -> tuple[list[int], list[int], list[int], list[int]]:
     """The components to render again in each family, in order; the lines of the others can be copied.
 
@@ -309,7 +296,8 @@ def _lines_to_render(
     values alone changed renders its values again, and the levels, level changes and status messages
     are copied, compressed, as they were: in a fleet most changes are values (a voltage, a temperature).
     Any other change (a message, a level, a hardware_id) renders all four of the component's families:
-    a third stamp to tell a message apart would cost every component 8 bytes more.
+    a third stamp to tell a message apart would cost every component 8 bytes more. With `values` False
+    (no value exported) a changed value renders nothing.
     """
     old_count, new_count = len(reusable) // 2, len(stamps) // 2
     count = min(old_count, new_count)
@@ -321,7 +309,9 @@ def _lines_to_render(
     else:
         every = [i for i in indices if firsts[i] != old_firsts[i] or firsts[i] == _MISSING]
     seconds, old_seconds = stamps[new_count : new_count + count], reusable[old_count : old_count + count]
-    revalued = [] if seconds == old_seconds else list(compress(indices, map(ne, seconds, old_seconds)))
+    # With no value exported every value line is empty: a changed value has none to render.
+    same_values = not values or seconds == old_seconds
+    revalued = [] if same_values else list(compress(indices, map(ne, seconds, old_seconds)))
     # The level decides whether a message has a line (MessageLabels "problems"), and is its label.
     judged, old_judged = levels[:count], reusable_levels[:count]
     moved = [] if judged == old_judged else list(compress(indices, map(ne, judged, old_judged)))
