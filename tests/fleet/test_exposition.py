@@ -19,7 +19,7 @@ from overseer.model import FleetLimits, FleetModel
 from overseer.serve.exposition_formats import OPENMETRICS, TEXT
 from support.clock import ManualClock
 from support.examples import examples
-from support.rendering import FORMATS, Rendering
+from support.rendering import FORMATS, Rendering, gunzip_one_member
 
 HOSTILE = ['quote"d', "back\\slash", "new\nline", "unicode ☃ 🤖", "brace}{=,", "tab\there", "", "\ufffd"]
 # Status messages go into a label too: besides the hostile names, a lone surrogate (not encodable as
@@ -127,6 +127,20 @@ def test_cached_lines_are_reused_for_unchanged_robots() -> None:
     model.touch('robot0/quote"d', "dds")
     rendering.fast(OPENMETRICS)  # the same cached lines serve either format
     assert all(rendering.exposition._robots[name] is lines for name, lines in cached.items())
+
+
+def test_robots_that_held_still_for_a_render_are_sent_as_runs_recompressed_whole() -> None:
+    model, _ = fleet()
+    for index in range(40):
+        statuses = tuple(DiagnosticStatus(index % 3, f"/c{c}", "fine", "", (("v", "1"),)) for c in range(20))
+        model.apply(f"still{index}", DiagnosticArray(0, 0, "", statuses), "dds")
+    rendering = Rendering(model)
+    first = rendering.assembler.assemble_gzip([rendering.exposition.render_part()], TEXT)
+    assert_equal_in_both_formats(rendering)  # renders again: every run held still since the first
+    model.touch("still3", "dds")  # a robot that republished the same array changes no run
+    joined = rendering.assembler.assemble_gzip([rendering.exposition.render_part()], TEXT)
+    assert gunzip_one_member(joined) == rendering.oracle(TEXT)
+    assert len(joined) < 0.8 * len(first)
 
 
 def three_components_rendered(

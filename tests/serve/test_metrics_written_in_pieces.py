@@ -107,7 +107,7 @@ def test_the_gzip_answer_is_the_same_text_in_one_member_never_joined(
 
     monkeypatch.setattr(server.assembler, "assemble_gzip", joined)
     scrape = scraped(server, use_gzip=True)
-    assert scrape.received == scrape.length > 2_000_000
+    assert scrape.received == scrape.length > 1_500_000  # runs of robots recompressed whole (joined_runs)
     assert scrape.text_matches
 
 

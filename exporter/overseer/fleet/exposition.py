@@ -4,7 +4,8 @@ Each robot's lines are kept between scrapes and rebuilt only when the robot's st
 stale components changed (most robots merely republished the same diagnostics); within a changed robot
 only the components whose stamps (hashes of what their lines are rendered from) or judged levels
 changed are rendered again. They are kept deflated (`deflated`), so
-that a gzip scrape sends the unchanged robots' bytes as they are. The lines are the same bytes in every
+that a gzip scrape sends the unchanged robots' bytes as they are, and runs of robots that held still for
+a render as one piece compressed again (`joined_runs`). The lines are the same bytes in every
 format a scrape may ask for (`exposition_formats`), so one cached part serves the text format and
 OpenMetrics alike; `assembler` adds the headers. The tests hold the result byte-identical to
 prometheus-client's rendering of the same fleet.
@@ -25,7 +26,8 @@ from typing import cast
 from prometheus_client.utils import floatToGoString
 
 from overseer.config.metrics import NO_VALUE_KEYS
-from overseer.fleet.deflated import Deflated, deflate, inflate, join
+from overseer.fleet.deflated import Deflated, deflate, inflate
+from overseer.fleet.joined_runs import JoinedRuns
 from overseer.fleet.message_labels import DEFAULT_MESSAGE_LABELS, MessageLabels, message_label_value
 from overseer.fleet.metric_values import NumericValues
 from overseer.fleet.stamps import field_hashes
@@ -100,6 +102,8 @@ class FleetExposition:
         self._messages = messages
         self._level_changes = level_changes
         self._robots: dict[str, _RobotLines] = {}
+        # Each per-component family's robots, in runs recompressed as one piece once they hold still.
+        self._runs = tuple(JoinedRuns() for _ in range(FAMILIES))
         self._lock = threading.Lock()
 
     def render_part(self) -> ExpositionPart:
@@ -118,6 +122,7 @@ class FleetExposition:
         levels, changes, values, messages = [], [], [], []
         robot_level, robot_up, last_message, periods, info = [], [], [], [], []
         counts, robot_changes = [], []
+        names = [robot.name for robot in snapshot.robots]
         for robot in snapshot.robots:
             label = f'{{robot="{escape_label_value(robot.name)}"}} '
             up = snapshot.robot_up(robot)
@@ -144,10 +149,11 @@ class FleetExposition:
                 period_text = render.number(round(period, 3))
                 periods.append(f"ros_diagnostics_robot_period_seconds{label}{period_text}\n")
         self._robots = current
+        levels_runs, changes_runs, values_runs, messages_runs = self._runs
         return ExpositionPart(
             len(current),
             (
-                join(levels),
+                levels_runs.join(names, levels),
                 deflate("".join(robot_level).encode()),
                 deflate("".join(robot_up).encode()),
                 deflate("".join(last_message).encode()),
@@ -155,9 +161,9 @@ class FleetExposition:
                 deflate("".join(info).encode()),
                 deflate(b"".join(counts)),
                 deflate(b"".join(robot_changes)),
-                join(changes),
-                join(values),
-                join(messages),
+                changes_runs.join(names, changes),
+                values_runs.join(names, values),
+                messages_runs.join(names, messages),
             ),
             dict(snapshot.message_counts),
             dict(snapshot.dropped_statuses),
