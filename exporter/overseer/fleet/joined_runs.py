@@ -1,14 +1,15 @@
 """Runs of robots' deflated pieces compressed again as one piece once they stop changing.
 
 Every robot's lines of a family are a piece of their own (`deflated`), so that a scrape copies the bytes
-of a robot that did not change. Laid end to end, ten thousand small pieces cost a scraper's decompressor
-more than one stream: each piece starts with no history to refer to, and ends its blocks with a flush
-(at 10,000 robots Prometheus took 1.46 times as long over the floor's text in such pieces as over it
-gzipped whole). Yet in a fleet most robots' levels and messages stay the same for minutes: a run of
-consecutive robots whose pieces are those of the render before is inflated and deflated again
-as one piece (a few milliseconds for a thousand robots), which later renders send as long as none of
-them changes. A run that changed is sent as its pieces until it holds still again for a render, so that
-a family that changes at every render (live values) is never compressed twice.
+of a robot that did not change. Laid end to end, ten thousand small pieces are a larger answer than one
+stream: each piece starts with no history to refer to, and ends its blocks with a flush (at 10,000
+robots, levels and messages only, 5.7 MB where gzip makes 3.9 MB of the same text, for the scraper to
+read and unzip at every scrape). Yet in a fleet most robots' levels and messages stay the same for
+minutes: a run of consecutive robots whose pieces are those of the render before is inflated and
+deflated again as one piece (about 20 ms of CPU for a thousand robots' levels and messages), which
+later renders send as long as none of them changes. A run that changed is sent as its pieces until it
+holds still again for a render, so that a family that changes at every render (live values) is never
+compressed twice.
 
 Runs end where a robot's name hashes to a multiple of `RUN_ROBOTS` (at the latest after
 `MOST_RUN_ROBOTS` robots): a robot that comes or goes changes its own run only, not every run after it.
