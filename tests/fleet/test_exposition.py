@@ -137,8 +137,11 @@ def test_robots_that_held_still_for_a_render_are_sent_as_runs_recompressed_whole
     rendering = Rendering(model)
     first = rendering.assembler.assemble_gzip([rendering.exposition.render_part()], TEXT)
     assert_equal_in_both_formats(rendering)  # renders again: every run held still since the first
+    recompressed = [runs.recompressed for runs in rendering.exposition._runs]
+    assert all(recompressed)
     model.touch("still3", "dds")  # a robot that republished the same array changes no run
     joined = rendering.assembler.assemble_gzip([rendering.exposition.render_part()], TEXT)
+    assert [runs.recompressed for runs in rendering.exposition._runs] == recompressed
     assert gunzip_one_member(joined) == rendering.oracle(TEXT)
     assert len(joined) < 0.8 * len(first)
 

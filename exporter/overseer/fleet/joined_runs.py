@@ -12,7 +12,9 @@ holds still again for a render, so that a family that changes at every render (l
 compressed twice.
 
 Runs end where a robot's name hashes to a multiple of `RUN_ROBOTS` (at the latest after
-`MOST_RUN_ROBOTS` robots): a robot that comes or goes changes its own run only, not every run after it.
+`MOST_RUN_ROBOTS` robots): a robot that comes or goes changes the run it falls in (the two it joins or
+splits, when its name ends a run), not every run after it (but in a streak of names of which none ends
+a run, which are cut by count).
 """
 
 from __future__ import annotations
@@ -35,12 +37,15 @@ class _Run:
 
 
 class JoinedRuns:
-    """A family's robots' pieces joined into one, runs that held still for a render recompressed whole."""
+    """A family's robots' pieces joined into one, runs that held still for a render recompressed whole.
+
+    Not safe to share between threads: the exposition joins under its own lock.
+    """
 
     def __init__(self) -> None:
         """Know of no run yet: the first render sends every piece as it is."""
         self._runs: dict[str, _Run] = {}
-        self.recompressed = 0  # runs compressed again as one piece, since the start
+        self.recompressed = 0  # runs compressed again as one piece, since the start (the tests read it)
 
     def join(self, names: Sequence[str], pieces: Sequence[Deflated]) -> Deflated:
         """The pieces in order as one piece; `names[i]` is the robot of `pieces[i]`."""
@@ -57,6 +62,7 @@ class JoinedRuns:
             if kept.joined is None:
                 kept.joined = deflate(b"".join(map(inflate, run)))
                 self.recompressed += 1
+            kept.pieces = run  # the pieces now: an equal one rendered anew frees the old
             runs[names[start]] = kept
             laid.append(kept.joined)
         self._runs = runs
