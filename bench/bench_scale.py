@@ -33,9 +33,13 @@ same Prometheus, a static server answering the exporter's own bytes: Prometheus'
 `--rules`, then a Prometheus with the shipped default config and rules (scraping every
 `--scrape-interval`) gives each rule group's evaluation time as a share of its interval (target <= 10 %,
 with the generator's 2 % of robots in trouble), and the rules that cost the most, from /api/v1/rules.
-The lost updates then cover the whole run, Prometheus included. With `--page`, after the window and
-while the fleet goes on publishing, Debian's Chromium loads the status page (the fleet, then one robot:
-first render, target <= 1 s) and `/api/v1/robots` and the newest page of `/api/v1/events` are timed.
+The lost updates then cover the whole run, Prometheus included. With `--prometheus-agent [STORE]` that
+Prometheus runs in agent mode and sends what it scrapes (`remote_write`) to a store that answers the
+queries (a second Prometheus, or Debian's single-node VictoriaMetrics with `victoria-metrics`): the
+layout for a fleet split into `--shards N` exporters (`--shard I/N`, `--workers` each, every figure
+theirs together), one store for them all. With `--page`, after the window and while the fleet goes on
+publishing, Debian's Chromium loads the status page (the fleet, then one robot: first render, target
+<= 1 s) and `/api/v1/robots` and the newest page of `/api/v1/events` are timed.
 """
 
 from __future__ import annotations
@@ -48,16 +52,16 @@ import statistics
 import tempfile
 import time
 import urllib.request
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
 from bench.bench_scrape import PROMETHEUS_ACCEPT, distinct_values, fetch, scrape_durations, static_server
 from bench.bench_status_page import first_render_ms, get_ms
-from bench.change_probe import ChangeProbe
+from bench.change_probe import PROBE_ROBOT, ChangeProbe
 from bench.common import (
     Row,
     cpu_seconds,
@@ -79,11 +83,19 @@ from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.zenoh_counter import CounterProcess, running_counter
 from overseer.config.ingest import MAX_INGEST_WORKERS
+from overseer.model.shard import Shard
 from overseer.model.state import FleetLimits
 from testbed.browser import headless_chromium
 from testbed.ports import fresh_domain_id
 from testbed.processes import Exporter, RunningProcess, running_exporter
-from testbed.prometheus import Prometheus, running_prometheus, shipped_config
+from testbed.prometheus import (
+    Prometheus,
+    running_agent,
+    running_prometheus,
+    running_store,
+    running_victoria_metrics,
+    shipped_config,
+)
 from testbed.zenoh import endpoint, exporter_args, running_router_process
 
 DEFAULT_MAX_ROBOTS = FleetLimits().max_robots
@@ -96,6 +108,12 @@ MEMORY_TARGET = 1000  # bytes a component, the exporter's processes together (is
 PAGE_SECONDS = 90  # the generator publishes this much longer while Chromium loads the status page
 PAGE_LOADS = 3
 PROMETHEUS_SETUP_SECONDS = 300  # the generator's margin for the body's fetch and Prometheus's start
+CHECKED_ROBOT = "robot1"  # the check, the page and the API read this robot of the fleet
+MAX_SHARDS = 8
+VICTORIA_METRICS = "victoria-metrics"
+STORES = ("prometheus", VICTORIA_METRICS)  # what a Prometheus agent can send its samples to, here
+
+_Number = TypeVar("_Number", int, float)
 
 
 class Counts(NamedTuple):
@@ -111,6 +129,40 @@ class Counts(NamedTuple):
     render_ahead_skipped: float  # expected scrapes not rendered ahead of, after futile passes
     render_ahead_seconds: float  # how long the last took
     over_cap: float  # statuses dropped because their robot was beyond fleet.max_robots
+
+
+def together(counts: Sequence[Counts]) -> Counts:
+    """Several shards' counts as one exporter's: summed, but the last render ahead the longest."""
+    summed = Counts(*(sum(values) for values in zip(*counts, strict=True)))
+    return summed._replace(render_ahead_seconds=max(count.render_ahead_seconds for count in counts))
+
+
+def forest(measure: Callable[[int], _Number], pids: Sequence[int]) -> _Number:
+    """`measure` (of a process and its descendants) summed over `pids`."""
+    return sum((measure(pid) for pid in pids[1:]), measure(pids[0]))
+
+
+def shard_of(exporters: Sequence[Exporter], robot: str) -> Exporter:
+    """The exporter, of shards `0/N` to `N-1/N` in that order, that follows `robot`."""
+    return next(e for index, e in enumerate(exporters) if Shard(index, len(exporters)).owns(robot))
+
+
+@contextlib.contextmanager
+def running_shards(directory: Path, wires: Wiring, shards: int, *args: str) -> Iterator[list[Exporter]]:
+    """`shards` exporters wired to the fleet, each `--shard I/N` (one: no flag), with `args`."""
+    with contextlib.ExitStack() as stack:
+        yield [
+            stack.enter_context(
+                running_exporter(
+                    directory,
+                    wires.domain,
+                    *wires.exporter_args,
+                    *([f"--shard={index}/{shards}"] if shards > 1 else []),
+                    *args,
+                )
+            )
+            for index in range(shards)
+        ]
 
 
 def counted(url: str, transport: str) -> Counts:
@@ -204,38 +256,64 @@ def floor_counter(wires: Wiring, directory: Path, wanted: bool) -> Iterator[Coun
         yield counter
 
 
+@contextlib.contextmanager
+def scraping_prometheus(
+    directory: Path, config: dict[str, Any], store: str | None
+) -> Iterator[tuple[Prometheus, list[RunningProcess]]]:
+    """A server holding what Prometheus scrapes as `config` says, and every server process of the layout.
+
+    With a `store` (one of STORES), Prometheus scrapes in agent mode and sends every sample
+    (`remote_write`) to that store, which answers the queries: the store is yielded, then both.
+    """
+    if store is None:
+        with running_prometheus(directory, config) as prometheus:
+            yield prometheus, [prometheus]
+        return
+    starting = running_victoria_metrics if store == VICTORIA_METRICS else running_store
+    with starting(directory) as receiver:
+        sending = {**config, "remote_write": [{"url": receiver.url + "/api/v1/write"}]}
+        with running_agent(directory, sending) as scraper:
+            yield receiver, [scraper, receiver]
+
+
 def scrape_against_floor(
-    exporter: Exporter,
+    exporters: Sequence[Exporter],
     components: int,
     directory: Path,
     seconds: float,
     interval: int,
     pieces: bool = False,
+    store: str | None = None,
 ) -> list[Row]:
-    """Prometheus scraping the exporter and a static copy of its bytes for `seconds`: its own durations.
+    """Prometheus scraping the exporters and a static copy of each one's bytes for `seconds`: its durations.
 
-    Meanwhile the exporter's memory (its `components` following) is read every second: a scrape takes
+    Meanwhile the exporters' memory (their `components` following) is read every second: a scrape takes
     memory of its own, which the figures read before and after Prometheus would not show.
-    With `pieces`, a third static server answers the same text gzipped as the exporter does (its robots'
-    deflated pieces end to end, where the floor's is one gzip stream): what the pieces cost Prometheus.
+    With `pieces`, a third static server a shard answers the same text gzipped as the exporter does (its
+    robots' deflated pieces end to end, where the floor's is one gzip stream): what the pieces cost
+    Prometheus. With a `store`, Prometheus scrapes in agent mode into that store (above).
     """
-    exporter_url = exporter.url
-    gzipped, content_type = fetch(exporter_url + "/metrics", PROMETHEUS_ACCEPT, "gzip")
-    body = gzip.decompress(gzipped)
-    with (
-        static_server(body, content_type) as floor,
-        static_server(body, content_type, gzipped) if pieces else contextlib.nullcontext("") as floor_pieces,
-    ):
-        jobs = [("overseer", exporter_url.removeprefix("http://")), ("floor", floor)]
-        jobs += [("floor_pieces", floor_pieces)] if pieces else []
+    answers = [fetch(exporter.url + "/metrics", PROMETHEUS_ACCEPT, "gzip") for exporter in exporters]
+    bodies = [(gzip.decompress(gzipped), gzipped, content_type) for gzipped, content_type in answers]
+    with contextlib.ExitStack() as servers:
+        floors = [servers.enter_context(static_server(body, kind)) for body, _, kind in bodies]
+        floors_in_pieces = [
+            servers.enter_context(static_server(body, kind, gzipped))
+            for body, gzipped, kind in (bodies if pieces else [])
+        ]
+        jobs = [("overseer", [exporter.url.removeprefix("http://") for exporter in exporters])]
+        jobs += [("floor", floors)] + ([("floor_pieces", floors_in_pieces)] if pieces else [])
         config = {
             "global": {"scrape_interval": f"{interval}s", "scrape_timeout": f"{interval}s"},
-            "scrape_configs": [{"job_name": job, "static_configs": [{"targets": [t]}]} for job, t in jobs],
+            "scrape_configs": [
+                {"job_name": job, "static_configs": [{"targets": targets}]} for job, targets in jobs
+            ],
         }
-        with running_prometheus(directory, config) as prometheus:
-            scraped_rss = highest_tree_resident(exporter.process.pid, time.monotonic() + seconds)
+        with scraping_prometheus(directory, config, store) as (prometheus, processes):
+            pids = [exporter.process.pid for exporter in exporters]
+            scraped_rss = highest_tree_resident(pids, time.monotonic() + seconds)
             ours = scrape_durations(prometheus, "overseer", seconds)
-            floors = scrape_durations(prometheus, "floor", seconds)
+            floors_seconds = scrape_durations(prometheus, "floor", seconds)
             pieces_floors = scrape_durations(prometheus, "floor_pieces", seconds) if pieces else []
             # Once the exporter has learned Prometheus's interval (metrics.render_ahead: three scrapes).
             learned = seconds - 3 * interval
@@ -245,14 +323,15 @@ def scrape_against_floor(
             render_seconds = 'overseer_exposition_last_render_seconds{job="overseer"}'
             renders_learned = distinct_values(prometheus, render_seconds, learned) if learned > 0 else []
             window = f"{int(seconds)}s"
-            attempts = prometheus.query(f'count_over_time(up{{job="overseer"}}[{window}])')
-            succeeded = prometheus.query(f'sum_over_time(up{{job="overseer"}}[{window}])')
-            samples = prometheus.query('scrape_samples_scraped{job="overseer"}')
-            prometheus_cpu = cpu_seconds(prometheus.process.pid) / seconds * 100
-            prometheus_memory = tree_resident_bytes(prometheus.process.pid)
+            attempts = prometheus.query(f'sum(count_over_time(up{{job="overseer"}}[{window}]))')
+            succeeded = prometheus.query(f'sum(sum_over_time(up{{job="overseer"}}[{window}]))')
+            samples = prometheus.query('sum(scrape_samples_scraped{job="overseer"})')
+            targets = prometheus.query('count(up{job="overseer"})')
+            prometheus_cpu = sum(cpu_seconds(server.process.pid) for server in processes) / seconds * 100
+            prometheus_memory = sum(tree_resident_bytes(server.process.pid) for server in processes)
     failed = float(attempts[0]["value"][1]) - float(succeeded[0]["value"][1]) if attempts else 0.0
     ours_median = statistics.median(ours) if ours else float("nan")
-    floor_median = statistics.median(floors) if floors else float("nan")
+    floor_median = statistics.median(floors_seconds) if floors_seconds else float("nan")
     ratio = ours_median / floor_median
     return [
         Row(
@@ -261,7 +340,13 @@ def scrape_against_floor(
             float(samples[0]["value"][1]) if samples else 0,
             "samples",
         ),
-        Row("scale", "Prometheus: exposition (its Accept, plain)", len(body) / 1e6, "MB"),
+        Row("scale", "Prometheus: exporters scraped", float(targets[0]["value"][1]) if targets else 0, ""),
+        Row(
+            "scale",
+            "Prometheus: exposition (its Accept, plain)",
+            sum(len(body) for body, _, _ in bodies) / 1e6,
+            "MB",
+        ),
         Row("scale", "Prometheus: scrape_duration_seconds, exporter (median)", ours_median, "s"),
         Row("scale", "Prometheus: scrape_duration_seconds, exporter (max)", max(ours, default=0.0), "s"),
         Row("scale", "Prometheus: scrape_duration_seconds, floor (median)", floor_median, "s"),
@@ -308,7 +393,7 @@ def scrape_against_floor(
             if ours_learned and floors_learned
             else []
         ),
-        Row("scale", "Prometheus: scrapes measured, exporter / floor", len(ours), f"/ {len(floors)}"),
+        Row("scale", "Prometheus: scrapes measured, exporter / floor", len(ours), f"/ {len(floors_seconds)}"),
         Row("scale", "Prometheus: exporter scrapes failed", failed, "scrapes", "0", failed == 0),
         Row(
             "scale",
@@ -318,8 +403,8 @@ def scrape_against_floor(
             f"<= {MEMORY_TARGET}",
             scraped_rss / components <= MEMORY_TARGET,
         ),
-        Row("scale", "Prometheus: its CPU since it started", prometheus_cpu, "% of a core"),
-        Row("scale", "Prometheus: its resident memory", prometheus_memory / 1e6, "MB"),
+        Row("scale", "Prometheus: its CPU since it started (every process)", prometheus_cpu, "% of a core"),
+        Row("scale", "Prometheus: its resident memory (every process)", prometheus_memory / 1e6, "MB"),
     ]
 
 
@@ -377,9 +462,13 @@ def rule_times(
     return {key: 100 * statistics.median(values) / intervals[key[0]] for key, values in times.items()}
 
 
-def shipped_rules_rows(exporter_url: str, directory: Path, seconds: float, interval: int) -> list[Row]:
+def shipped_rules_rows(
+    exporter_urls: Sequence[str], directory: Path, seconds: float, interval: int
+) -> list[Row]:
     """The default profile's shipped config and rules, scraping every `interval`: each group's share."""
-    config = shipped_config(PROFILES["default"], exporter_url)
+    config = shipped_config(PROFILES["default"], exporter_urls[0])
+    targets = [url.removeprefix("http://") for url in exporter_urls]
+    config["scrape_configs"][0]["static_configs"] = [{"targets": targets}]
     config["global"].update(scrape_interval=f"{interval}s", scrape_timeout=f"{interval}s")
     with running_prometheus(directory, config) as prometheus:
         time.sleep(2 * interval)  # the first scrapes in: the rules then read the whole fleet
@@ -431,6 +520,8 @@ def run(
     page: bool = False,
     head_start: float = 0.0,
     floor_pieces: bool = False,
+    shards: int = 1,
+    store: str | None = None,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
@@ -440,10 +531,14 @@ def run(
     status page and the JSON API and event history are read. `head_start`: the robots are declared that
     many seconds before they publish (a router takes seconds to pass a large fleet's tokens on).
     `floor_pieces`: Prometheus also scrapes the floor's text gzipped as the exporter gzips it.
+    `shards`: that many exporters (`--shard I/N`, `workers` each) share the fleet; the figures are theirs
+    together. `store`: Prometheus scrapes in agent mode and sends the samples to that store (STORES).
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
     label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}"
+    label += f" in each of {shards} shards" if shards > 1 else ""
+    label += f", Prometheus in agent mode into {store}" if store else ""
     label += f", declared {head_start:g} s before publishing" if head_start else ""
     label += "".join(f", {option}" for option in exporter_options)
     phases = 1 + rules  # the floor's, then the rules'
@@ -454,21 +549,21 @@ def run(
     with (
         tempfile.TemporaryDirectory() as tmp,
         wiring(transport, Path(tmp)) as wires,
-        running_exporter(
+        running_shards(
             Path(tmp),
-            wires.domain,
-            *wires.exporter_args,
+            wires,
+            shards,
             f"--ingest.workers={workers}",
             # Headroom, not a limit: the probe robot comes on top of the fleet.
             f"--fleet.max-robots={max(DEFAULT_MAX_ROBOTS, 2 * robots)}",
             "--log.level=warning",
             *exporter_options,
-        ) as exporter,
+        ) as exporters,
         floor_counter(wires, Path(tmp), floor) as counter,
     ):
-        pid = exporter.process.pid
-        idle_rss = tree_resident_bytes(pid)  # before the fleet: what the processes take following no robot
-        started_cpu, router_cpu, started = tree_cpu_seconds(pid), wires.router_cpu(), 0.0
+        pids = [exporter.process.pid for exporter in exporters]
+        idle_rss = forest(tree_resident_bytes, pids)  # before the fleet: what they take following no robot
+        started_cpu, router_cpu, started = forest(tree_cpu_seconds, pids), wires.router_cpu(), 0.0
         with running_loadgen(
             [
                 *shape_arguments(shape, rate),
@@ -481,52 +576,61 @@ def run(
         ) as loadgen:
             loadgen.wait_ready(max(60, robots / 50))
             time.sleep(head_start)  # the window opens as the robots start publishing, as without a head start
-            started, started_cpu, router_cpu = time.monotonic(), tree_cpu_seconds(pid), wires.router_cpu()
+            started, started_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
+            router_cpu = wires.router_cpu()
             prometheus_rows: list[Row] = []
-            with wires.probe(exporter.url, shape.components) as probe:
+            with wires.probe(shard_of(exporters, PROBE_ROBOT).url, shape.components) as probe:
                 # Steady: from the window's middle (the first look long over) to the check's runs.
                 time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
-                steady_from, steady_cpu = time.monotonic(), tree_cpu_seconds(pid)
+                steady_from, steady_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
-                steady_rss = highest_tree_resident(pid, steady_until)
-                steady_cpu = (tree_cpu_seconds(pid) - steady_cpu) / (time.monotonic() - steady_from)
-                checks = check_rows(exporter.url, "robot1")  # the last seconds of the window
+                steady_rss = highest_tree_resident(pids, steady_until)
+                steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
+                checked = shard_of(exporters, CHECKED_ROBOT).url
+                checks = check_rows(checked, CHECKED_ROBOT)  # the last seconds of the window
                 if page:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
-                    checks += page_rows(exporter.url, "robot1")
+                    checks += page_rows(checked, CHECKED_ROBOT)
                 if prometheus_seconds:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
                     prometheus_rows = scrape_against_floor(
-                        exporter,
+                        exporters,
                         robots * shape.components,
                         Path(tmp),
                         prometheus_seconds,
                         interval,
                         floor_pieces,
+                        store,
                     )
                     if rules:
                         prometheus_rows += shipped_rules_rows(
-                            exporter.url, Path(tmp) / "rules", prometheus_seconds, interval
+                            [exporter.url for exporter in exporters],
+                            Path(tmp) / "rules",
+                            prometheus_seconds,
+                            interval,
                         )
                     figures = loadgen.finish()
                 else:  # with the page measured, the generator's margin need not run out
                     figures = loadgen.finish() if page else loadgen.figures(seconds + 600)
         time.sleep(SETTLE_SECONDS)
         elapsed = time.monotonic() - started
-        cpu = tree_cpu_seconds(pid) - started_cpu
+        cpu = forest(tree_cpu_seconds, pids) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
-        counts = counted(exporter.url, transport)
+        counts = together([counted(exporter.url, transport) for exporter in exporters])
         probed = probe.published if probe else 0
         got = counts.received - probed
         floor_got = counter.samples() - probed if counter else None
-        rss, pss = tree_resident_bytes(pid), tree_proportional_bytes(pid)
-        scrape_seconds, scrape_bytes = min(scrape(exporter.url) for _ in range(3))
-    lost = max(0.0, figures.published - got)
+        rss, pss = forest(tree_resident_bytes, pids), forest(tree_proportional_bytes, pids)
+        reads = [min(scrape(exporter.url) for _ in range(3)) for exporter in exporters]
+        scrape_seconds, scrape_bytes = max(seconds for seconds, _ in reads), sum(size for _, size in reads)
+    lost, twice = max(0.0, figures.published - got), max(0.0, got - figures.published)
     components = robots * shape.components
     generator = f"(generator {figures.cpu_percent_per_1000_robots:.1f} % of a core per 1,000 robots)"
     return [
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
+        # Heard twice: a robot followed by two shards (or worse, counted twice).
+        Row("scale", f"{label}: heard beyond what was published", twice, "messages", "0", twice == 0),
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
         Row("scale", f"{label}: of which the exporter heard and dropped", counts.dropped, "messages"),
         Row(
@@ -632,8 +736,8 @@ def run(
             if prometheus_seconds
             else []
         ),
-        Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),
-        Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),
+        Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),  # the slowest shard's
+        Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),  # every shard's
         *(probe.rows(label) if probe else []),
     ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
 
@@ -666,6 +770,10 @@ def check_window(options: argparse.Namespace) -> None:
         raise ValueError("--rules: needs --prometheus-seconds (the rules run in that Prometheus)")
     if options.floor_pieces and not options.prometheus_seconds:
         raise ValueError("--floor-pieces: needs --prometheus-seconds (that Prometheus scrapes it)")
+    if options.prometheus_agent and not options.prometheus_seconds:
+        raise ValueError("--prometheus-agent: needs --prometheus-seconds (that Prometheus is the agent)")
+    if not 1 <= options.shards <= MAX_SHARDS:
+        raise ValueError(f"--shards: must be from 1 to {MAX_SHARDS}, got {options.shards}")
     check_head_start(options.head_start)
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
@@ -713,6 +821,20 @@ def main(argv: Sequence[str] | None = None) -> None:
         action="store_true",
         help="Prometheus also scrapes the floor's text in the exporter's gzip pieces (--prometheus-seconds)",
     )
+    parser.add_argument(
+        "--shards",
+        type=int,
+        default=1,
+        help=f"exporters sharing the fleet (--shard I/N, --workers each; 1 to {MAX_SHARDS}, default 1)",
+    )
+    parser.add_argument(
+        "--prometheus-agent",
+        nargs="?",
+        const="prometheus",
+        choices=STORES,
+        metavar="STORE",
+        help=f"Prometheus scrapes as an agent into STORE ({' or '.join(STORES)}; --prometheus-seconds)",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args(argv)
     try:  # before any server starts: a run refused after minutes of setup measures nothing
@@ -739,6 +861,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.page,
                 options.head_start,
                 options.floor_pieces,
+                options.shards,
+                options.prometheus_agent,
             )
     emit(rows)
 

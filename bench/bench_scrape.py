@@ -155,9 +155,12 @@ def scrape_durations(prometheus: Any, job: str, seconds: float) -> list[float]:
 
 
 def distinct_values(prometheus: Any, query: str, seconds: float) -> list[float]:
-    """The values `query`'s first series took over the last `seconds` (one a scrape), each once, sorted."""
+    """The values each of `query`'s series took over the last `seconds` (one a scrape), each once, sorted.
+
+    One series a target: with several targets (an exporter's shards), every target's scrapes.
+    """
     series = prometheus.query_range(query, seconds, f"{INTERVAL_SECONDS}s")
-    return sorted({float(value) for _, value in series[0]["values"]}) if series else []
+    return sorted(value for one in series for value in {float(value) for _, value in one["values"]})
 
 
 def family_sizes(body: bytes) -> dict[str, tuple[int, int]]:

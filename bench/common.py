@@ -156,11 +156,12 @@ def _summed_over_tree(pid: int, measure: Callable[[int], _Number], zero: _Number
     return total
 
 
-def highest_tree_resident(pid: int, until: float, every: float = 1.0) -> int:
-    """The most resident memory of `pid` and its descendants, read every `every` s until `until`."""
+def highest_tree_resident(pids: Iterable[int], until: float, every: float = 1.0) -> int:
+    """The most resident memory of `pids` and their descendants together, read every `every` s to `until`."""
+    pids = tuple(pids)
     highest = 0
     while True:
-        highest = max(highest, tree_resident_bytes(pid))
+        highest = max(highest, sum(tree_resident_bytes(pid) for pid in pids))
         left = until - time.monotonic()
         if left <= 0:
             return highest

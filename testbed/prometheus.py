@@ -176,6 +176,52 @@ def running_prometheus(tmp_path: Path, config: dict[str, Any]) -> Iterator[Prome
 
 
 @contextmanager
+def running_store(tmp_path: Path, config: dict[str, Any] | None = None) -> Iterator[Prometheus]:
+    """Run Debian's `prometheus` with `config` (none: it scrapes nothing), storing what agents send it."""
+    flags = ("--storage.tsdb.path", "--web.enable-remote-write-receiver")
+    with running_server(tmp_path, Prometheus, "prometheus", config or {}, *flags) as store:
+        yield store
+
+
+@contextmanager
+def running_agent(tmp_path: Path, config: dict[str, Any]) -> Iterator[Prometheus]:
+    """Run Debian's `prometheus` in agent mode: it scrapes as `config` says, for its `remote_write` only.
+
+    An agent answers no query: read what it scraped from the store it sends to.
+    """
+    flags = ("--storage.agent.path", "--enable-feature=agent")
+    with running_server(tmp_path, Prometheus, "prometheus", config, *flags) as agent:
+        yield agent
+
+
+@contextmanager
+def running_victoria_metrics(tmp_path: Path) -> Iterator[Prometheus]:
+    """Run Debian's single-node `victoria-metrics` on loopback: a store agents send to (`/api/v1/write`).
+
+    It answers Prometheus's query API; its queries see samples as they arrive (no 30 s latency offset)
+    and are not cached, so that a figure read twice is read from the samples each time.
+    """
+    port = free_port()
+    directory = tmp_path / f"victoria-metrics-{port}"
+    directory.mkdir(parents=True, exist_ok=True)
+    args = [
+        "victoria-metrics",
+        f"-httpListenAddr=127.0.0.1:{port}",
+        f"-storageDataPath={directory / 'data'}",
+        "-retentionPeriod=1d",
+        "-search.latencyOffset=0s",
+        "-search.disableCache",
+    ]
+    log_path = directory / "victoria-metrics.log"
+    store = Prometheus(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
+    try:
+        wait_until_ready(store, store.url + "/health")
+        yield store
+    finally:
+        store.stop()
+
+
+@contextmanager
 def running_server(
     tmp_path: Path,
     server_class: Callable[[subprocess.Popen[bytes], Path, str], ServerT],

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from bench.bench_scale import run
+from bench.bench_scale import STORES, run
 from bench.common import Row
 from bench.loadgen_payloads import FleetShape
 
@@ -89,3 +89,36 @@ def test_a_tiny_fleet_on_four_workers_is_heard_whole_with_its_probe_robot() -> N
     assert row("statuses dropped beyond fleet.max_robots").met
     assert row("lost updates").value == 0
     assert row("changes timed").value >= SECONDS / 4  # the probe robot was followed
+
+
+@pytest.mark.parametrize("store", STORES)
+def test_two_shards_share_the_fleet_and_an_agent_sends_their_scrapes_to_one_store(store: str) -> None:
+    # Issue 32's sharded layout: two exporters (`--shard 0/2`, `1/2`) on the same router, scraped by a
+    # Prometheus in agent mode whose remote_write fills a store (a Prometheus, VictoriaMetrics), which the
+    # figures are read from.
+    shape = FleetShape(robots=ROBOTS, components=COMPONENTS)
+    rows = {
+        row.figure: row
+        for row in run(
+            shape, workers=1, seconds=SECONDS / 2, prometheus_seconds=30, interval=5, shards=2, store=store
+        )
+    }
+    label = "20 robots x 20, realistic, zenoh, 1 worker in each of 2 shards"
+    label += f", Prometheus in agent mode into {store}"
+
+    def row(figure: str) -> Row:
+        return rows[f"{label}: {figure}"]
+
+    # Every robot heard by exactly one shard: none lost, none heard twice.
+    assert row("lost updates").value == 0
+    assert row("heard beyond what was published").value == 0 and row("heard beyond what was published").met
+    assert row("changes timed").value >= SECONDS / 4  # the probe read from the shard that follows it
+    assert row("check_ros_diagnostics / python -c pass").value > 0  # robot1, from its own shard
+    # The store holds both shards' scrapes, sent by the agent: two targets' worth in 30 s at 5 s.
+    scrapes = row("Prometheus: scrapes measured, exporter / floor")
+    assert scrapes.value >= 2 * 3 and scrapes.unit.removeprefix("/ ").isdigit(), scrapes
+    assert int(scrapes.unit.removeprefix("/ ")) >= 2 * 3
+    assert row("Prometheus: exporter scrapes failed").value == 0
+    assert row("Prometheus: exporters scraped").value == 2  # both shards' series reached the store
+    assert row("Prometheus: samples a scrape").value > ROBOTS * COMPONENTS  # a level a component, and more
+    assert 0 < row("Prometheus: exporter / floor").value < 20
