@@ -52,20 +52,21 @@ import statistics
 import tempfile
 import time
 import urllib.request
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
 from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
-from bench.bench_scrape import PROMETHEUS_ACCEPT, distinct_values, fetch, scrape_durations, static_server
+from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, scraped_values, static_server
 from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import PROBE_ROBOT, ChangeProbe
 from bench.common import (
     Row,
     cpu_seconds,
     emit,
+    forest,
     highest_tree_resident,
     tree_cpu_seconds,
     tree_proportional_bytes,
@@ -113,7 +114,7 @@ MAX_SHARDS = 8
 VICTORIA_METRICS = "victoria-metrics"
 STORES = ("prometheus", VICTORIA_METRICS)  # what a Prometheus agent can send its samples to, here
 
-_Number = TypeVar("_Number", int, float)
+_Shard = TypeVar("_Shard")
 
 
 class Counts(NamedTuple):
@@ -137,12 +138,7 @@ def together(counts: Sequence[Counts]) -> Counts:
     return summed._replace(render_ahead_seconds=max(count.render_ahead_seconds for count in counts))
 
 
-def forest(measure: Callable[[int], _Number], pids: Sequence[int]) -> _Number:
-    """`measure` (of a process and its descendants) summed over `pids`."""
-    return sum((measure(pid) for pid in pids[1:]), measure(pids[0]))
-
-
-def shard_of(exporters: Sequence[Exporter], robot: str) -> Exporter:
+def shard_of(exporters: Sequence[_Shard], robot: str) -> _Shard:
     """The exporter, of shards `0/N` to `N-1/N` in that order, that follows `robot`."""
     return next(e for index, e in enumerate(exporters) if Shard(index, len(exporters)).owns(robot))
 
@@ -165,13 +161,22 @@ def running_shards(directory: Path, wires: Wiring, shards: int, *args: str) -> I
         ]
 
 
-def counted(url: str, transport: str) -> Counts:
-    """Messages received, lost and dropped over `transport`, events, renders ahead, robots beyond the cap.
+def metrics_text(url: str) -> str:
+    """`/metrics` as text, read as Prometheus reads it (`scrape`).
 
-    Read as Prometheus reads (`scrape`): a plain-text read of 10,000 robots makes the exporter inflate
-    every robot's compressed lines, 170 MB, which its memory, measured next, would count.
+    A plain-text read of 10,000 robots would make the exporter inflate every robot's compressed lines,
+    170 MB, which its memory, measured next, would count.
     """
-    text = scrape_text(url)[0].decode()
+    return scrape_text(url)[0].decode()
+
+
+def followed_robots(text: str) -> set[str]:
+    """The robots an exporter's `/metrics` text lists (up or down): those it follows."""
+    return set(re.findall(r'^ros_diagnostics_robot_up\{robot="((?:[^"\\]|\\.)*)"\} ', text, re.MULTILINE))
+
+
+def counted(text: str, transport: str) -> Counts:
+    """Messages received, lost and dropped over `transport`, events, renders ahead, robots beyond the cap."""
 
     def total(pattern: str) -> float:
         return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
@@ -256,24 +261,49 @@ def floor_counter(wires: Wiring, directory: Path, wanted: bool) -> Iterator[Coun
         yield counter
 
 
+class Scraping(NamedTuple):
+    """The servers of one layout: the one answering queries, every one (for CPU and memory), the agent."""
+
+    queried: Prometheus
+    servers: list[Prometheus]
+    agent: Prometheus | None
+
+
 @contextlib.contextmanager
-def scraping_prometheus(
-    directory: Path, config: dict[str, Any], store: str | None
-) -> Iterator[tuple[Prometheus, list[RunningProcess]]]:
-    """A server holding what Prometheus scrapes as `config` says, and every server process of the layout.
+def scraping_prometheus(directory: Path, config: dict[str, Any], store: str | None) -> Iterator[Scraping]:
+    """The servers that scrape as `config` says, and hold what they scraped.
 
     With a `store` (one of STORES), Prometheus scrapes in agent mode and sends every sample
-    (`remote_write`) to that store, which answers the queries: the store is yielded, then both.
+    (`remote_write`) to that store, which answers the queries.
     """
+    if store not in (None, *STORES):
+        raise ValueError(f"store: one of {', '.join(STORES)}, got {store!r}")
     if store is None:
         with running_prometheus(directory, config) as prometheus:
-            yield prometheus, [prometheus]
+            yield Scraping(prometheus, [prometheus], None)
         return
     starting = running_victoria_metrics if store == VICTORIA_METRICS else running_store
     with starting(directory) as receiver:
         sending = {**config, "remote_write": [{"url": receiver.url + "/api/v1/write"}]}
-        with running_agent(directory, sending) as scraper:
-            yield receiver, [scraper, receiver]
+        with running_agent(directory, sending) as agent:
+            yield Scraping(receiver, [agent, receiver], agent)
+
+
+def wait_until_sent(agent: Prometheus, timeout: float = 120.0) -> None:
+    """Wait until `agent` has sent its store every sample it had taken in when called (or `timeout`)."""
+
+    def newest(gauge: str) -> float:
+        with urllib.request.urlopen(agent.url + "/metrics", timeout=10) as response:
+            text = response.read().decode()
+        values = re.findall(rf"^{gauge}(?:{{[^}}]*}})? (\S+)$", text, re.MULTILINE)
+        return max((float(value) for value in values), default=0.0)
+
+    taken_in = newest("prometheus_remote_storage_highest_timestamp_in_seconds")
+    deadline = time.monotonic() + timeout
+    while newest("prometheus_remote_storage_queue_highest_sent_timestamp_seconds") < taken_in:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the agent did not send its samples of {taken_in} within {timeout} s")
+        time.sleep(1.0)
 
 
 def scrape_against_floor(
@@ -309,9 +339,11 @@ def scrape_against_floor(
                 {"job_name": job, "static_configs": [{"targets": targets}]} for job, targets in jobs
             ],
         }
-        with scraping_prometheus(directory, config, store) as (prometheus, processes):
+        with scraping_prometheus(directory, config, store) as (prometheus, scrapers, agent):
             pids = [exporter.process.pid for exporter in exporters]
             scraped_rss = highest_tree_resident(pids, time.monotonic() + seconds)
+            if agent is not None:  # the store holds a scrape once the agent has sent it
+                wait_until_sent(agent)
             ours = scrape_durations(prometheus, "overseer", seconds)
             floors_seconds = scrape_durations(prometheus, "floor", seconds)
             pieces_floors = scrape_durations(prometheus, "floor_pieces", seconds) if pieces else []
@@ -321,14 +353,14 @@ def scrape_against_floor(
             floors_learned = scrape_durations(prometheus, "floor", learned) if learned > 0 else []
             # The exporter's own wait for its series before the first byte, stored at each scrape.
             render_seconds = 'overseer_exposition_last_render_seconds{job="overseer"}'
-            renders_learned = distinct_values(prometheus, render_seconds, learned) if learned > 0 else []
+            renders_learned = scraped_values(prometheus, render_seconds, learned) if learned > 0 else []
             window = f"{int(seconds)}s"
             attempts = prometheus.query(f'sum(count_over_time(up{{job="overseer"}}[{window}]))')
             succeeded = prometheus.query(f'sum(sum_over_time(up{{job="overseer"}}[{window}]))')
             samples = prometheus.query('sum(scrape_samples_scraped{job="overseer"})')
             targets = prometheus.query('count(up{job="overseer"})')
-            prometheus_cpu = sum(cpu_seconds(server.process.pid) for server in processes) / seconds * 100
-            prometheus_memory = sum(tree_resident_bytes(server.process.pid) for server in processes)
+            prometheus_cpu = sum(cpu_seconds(server.process.pid) for server in scrapers) / seconds * 100
+            prometheus_memory = sum(tree_resident_bytes(server.process.pid) for server in scrapers)
     failed = float(attempts[0]["value"][1]) - float(succeeded[0]["value"][1]) if attempts else 0.0
     ours_median = statistics.median(ours) if ours else float("nan")
     floor_median = statistics.median(floors_seconds) if floors_seconds else float("nan")
@@ -616,21 +648,40 @@ def run(
         elapsed = time.monotonic() - started
         cpu = forest(tree_cpu_seconds, pids) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
-        counts = together([counted(exporter.url, transport) for exporter in exporters])
+        texts = [metrics_text(exporter.url) for exporter in exporters]
+        counts = together([counted(text, transport) for text in texts])
+        followed = [followed_robots(text) for text in texts]
         probed = probe.published if probe else 0
         got = counts.received - probed
         floor_got = counter.samples() - probed if counter else None
         rss, pss = forest(tree_resident_bytes, pids), forest(tree_proportional_bytes, pids)
         reads = [min(scrape(exporter.url) for _ in range(3)) for exporter in exporters]
         scrape_seconds, scrape_bytes = max(seconds for seconds, _ in reads), sum(size for _, size in reads)
-    lost, twice = max(0.0, figures.published - got), max(0.0, got - figures.published)
+    lost = max(0.0, figures.published - got)
+    robots_followed = set().union(*followed)
+    followed_twice = sum(len(robots) for robots in followed) - len(robots_followed)
+    fleet = robots + (1 if probe else 0)
     components = robots * shape.components
     generator = f"(generator {figures.cpu_percent_per_1000_robots:.1f} % of a core per 1,000 robots)"
     return [
         Row("scale", f"{label}: published {generator}", figures.published, "messages"),
         Row("scale", f"{label}: lost updates", lost, "messages", "0", lost == 0),
-        # Heard twice: a robot followed by two shards (or worse, counted twice).
-        Row("scale", f"{label}: heard beyond what was published", twice, "messages", "0", twice == 0),
+        Row(
+            "scale",
+            f"{label}: robots followed (the probe's included)",
+            len(robots_followed),
+            "robots",
+            f"{fleet}",
+            len(robots_followed) == fleet,
+        ),
+        Row(
+            "scale",
+            f"{label}: robots followed by more than one shard",
+            followed_twice,
+            "robots",
+            "0",
+            followed_twice == 0,
+        ),
         Row("scale", f"{label}: of which the exporter counted lost", counts.lost, "messages"),
         Row("scale", f"{label}: of which the exporter heard and dropped", counts.dropped, "messages"),
         Row(

@@ -150,17 +150,18 @@ def fetch(url: str, accept: str, encoding: str = "identity") -> tuple[bytes, str
 
 
 def scrape_durations(prometheus: Any, job: str, seconds: float) -> list[float]:
-    """Prometheus's own scrape_duration_seconds of `job` over the last `seconds`."""
-    return distinct_values(prometheus, f'scrape_duration_seconds{{job="{job}"}}', seconds)
+    """Prometheus's own scrape_duration_seconds of `job` over the last `seconds`, one a scrape."""
+    return scraped_values(prometheus, f'scrape_duration_seconds{{job="{job}"}}', seconds)
 
 
-def distinct_values(prometheus: Any, query: str, seconds: float) -> list[float]:
-    """The values each of `query`'s series took over the last `seconds` (one a scrape), each once, sorted.
+def scraped_values(prometheus: Any, selector: str, seconds: float) -> list[float]:
+    """Every sample `selector`'s series hold from the last `seconds` (one a scrape, every target's), sorted.
 
-    One series a target: with several targets (an exporter's shards), every target's scrapes.
+    Read raw (a range selector at one instant), so that Prometheus and a store such as VictoriaMetrics,
+    which look back differently between the steps of a range query, give the same samples.
     """
-    series = prometheus.query_range(query, seconds, f"{INTERVAL_SECONDS}s")
-    return sorted(value for one in series for value in {float(value) for _, value in one["values"]})
+    series = prometheus.query(f"{selector}[{max(1, round(seconds))}s]")
+    return sorted(float(value) for one in series for _, value in one["values"])
 
 
 def family_sizes(body: bytes) -> dict[str, tuple[int, int]]:

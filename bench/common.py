@@ -9,7 +9,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from typing import TextIO, TypeVar
 
@@ -154,6 +154,11 @@ def _summed_over_tree(pid: int, measure: Callable[[int], _Number], zero: _Number
         with contextlib.suppress(OSError, ValueError):  # it ended meanwhile
             total += measure(member)
     return total
+
+
+def forest(measure: Callable[[int], _Number], pids: Sequence[int]) -> _Number:
+    """`measure` (of a process and its descendants) summed over `pids`, at least one."""
+    return sum((measure(pid) for pid in pids[1:]), measure(pids[0]))
 
 
 def highest_tree_resident(pids: Iterable[int], until: float, every: float = 1.0) -> int:

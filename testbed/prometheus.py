@@ -214,11 +214,8 @@ def running_victoria_metrics(tmp_path: Path) -> Iterator[Prometheus]:
     ]
     log_path = directory / "victoria-metrics.log"
     store = Prometheus(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
-    try:
-        wait_until_ready(store, store.url + "/health")
+    with serving(store, "/health"):
         yield store
-    finally:
-        store.stop()
 
 
 @contextmanager
@@ -250,8 +247,15 @@ def running_server(
     ]
     log_path = directory / f"{program}.log"
     server = server_class(spawn(args, log_path), log_path, f"http://127.0.0.1:{port}")
-    try:
-        wait_until_ready(server, server.url + "/-/ready")
+    with serving(server, "/-/ready"):
         yield server
+
+
+@contextmanager
+def serving(server: RunningServer, ready_path: str) -> Iterator[None]:
+    """Wait for `server` to answer GET `ready_path`, and stop it when the block ends, or if it never does."""
+    try:
+        wait_until_ready(server, server.url + ready_path)
+        yield
     finally:
         server.stop()

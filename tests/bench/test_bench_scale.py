@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import pytest
 
-from bench.bench_scale import STORES, run
+from bench.bench_scale import STORES, run, shard_of
 from bench.common import Row
 from bench.loadgen_payloads import FleetShape
+from overseer.model.shard import Shard
 
 pytestmark = pytest.mark.servers
 
@@ -109,11 +110,12 @@ def test_two_shards_share_the_fleet_and_an_agent_sends_their_scrapes_to_one_stor
     def row(figure: str) -> Row:
         return rows[f"{label}: {figure}"]
 
-    # Every robot heard by exactly one shard: none lost, none heard twice.
+    # Every robot followed by exactly one shard: the fleet and the probe, none twice, none lost.
+    assert row("robots followed (the probe's included)").value == ROBOTS + 1
+    assert row("robots followed by more than one shard").value == 0
+    assert row("robots followed by more than one shard").met
     assert row("lost updates").value == 0
-    assert row("heard beyond what was published").value == 0 and row("heard beyond what was published").met
     assert row("changes timed").value >= SECONDS / 4  # the probe read from the shard that follows it
-    assert row("check_ros_diagnostics / python -c pass").value > 0  # robot1, from its own shard
     # The store holds both shards' scrapes, sent by the agent: two targets' worth in 30 s at 5 s.
     scrapes = row("Prometheus: scrapes measured, exporter / floor")
     assert scrapes.value >= 2 * 3 and scrapes.unit.removeprefix("/ ").isdigit(), scrapes
@@ -122,3 +124,12 @@ def test_two_shards_share_the_fleet_and_an_agent_sends_their_scrapes_to_one_stor
     assert row("Prometheus: exporters scraped").value == 2  # both shards' series reached the store
     assert row("Prometheus: samples a scrape").value > ROBOTS * COMPONENTS  # a level a component, and more
     assert 0 < row("Prometheus: exporter / floor").value < 20
+
+
+def test_the_probe_check_and_page_read_the_shard_that_follows_their_robot() -> None:
+    shards = ["shard0", "shard1", "shard2"]
+    robots = ["probe", "robot1", *(f"robot{n}" for n in range(2, 40))]
+    for robot in robots:
+        (owner,) = [shard for index, shard in enumerate(shards) if Shard(index, 3).owns(robot)]
+        assert shard_of(shards, robot) == owner
+    assert {shard_of(shards, robot) for robot in robots} == set(shards)
