@@ -304,7 +304,7 @@ def measure_profile(
     directory.mkdir()
     received_before = len(webhook.alerts())
     with running_alertmanager(directory, example_config(webhook.url)) as alertmanager:
-        config = shipped_config(PROFILES[profile], exporter.url, alertmanager.url)
+        config = shipped_config(PROFILES[profile], [exporter.url], alertmanager.url)
         timeout = parse_duration(config["global"]["scrape_timeout"])
         # The floor's alerts stay in Prometheus: only the shipped alerts reach Alertmanager.
         config["alerting"]["alert_relabel_configs"] = [

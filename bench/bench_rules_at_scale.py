@@ -81,7 +81,7 @@ def measure(
 ) -> tuple[list[Row], dict[str, Any]]:
     """The shipped rules (and `compare`'s) over `body` scraped every `interval`, after `warm_up` seconds."""
     with static_server(body, TEXT.content_type) as target:
-        config = shipped_config(PROFILES["default"], f"http://{target}")
+        config = shipped_config(PROFILES["default"], [f"http://{target}"])
         config["global"].update(scrape_interval=f"{interval}s", scrape_timeout=f"{interval}s")
         if compare is not None:
             config["rule_files"].append(str(compared_rules(compare, directory / "compared.rules.yml")))

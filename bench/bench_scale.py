@@ -498,9 +498,7 @@ def shipped_rules_rows(
     exporter_urls: Sequence[str], directory: Path, seconds: float, interval: int
 ) -> list[Row]:
     """The default profile's shipped config and rules, scraping every `interval`: each group's share."""
-    config = shipped_config(PROFILES["default"], exporter_urls[0])
-    targets = [url.removeprefix("http://") for url in exporter_urls]
-    config["scrape_configs"][0]["static_configs"] = [{"targets": targets}]
+    config = shipped_config(PROFILES["default"], exporter_urls)
     config["global"].update(scrape_interval=f"{interval}s", scrape_timeout=f"{interval}s")
     with running_prometheus(directory, config) as prometheus:
         time.sleep(2 * interval)  # the first scrapes in: the rules then read the whole fleet

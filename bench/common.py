@@ -166,7 +166,7 @@ def highest_tree_resident(pids: Iterable[int], until: float, every: float = 1.0)
     pids = tuple(pids)
     highest = 0
     while True:
-        highest = max(highest, sum(tree_resident_bytes(pid) for pid in pids))
+        highest = max(highest, forest(tree_resident_bytes, pids))
         left = until - time.monotonic()
         if left <= 0:
             return highest

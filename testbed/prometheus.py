@@ -9,7 +9,7 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,17 +126,22 @@ class Prometheus(RunningServer):
 
 
 def shipped_config(
-    name: str, exporter_url: str, alertmanager_url: str | None = None, interval: str | None = None
+    name: str,
+    exporter_urls: Sequence[str],
+    alertmanager_url: str | None = None,
+    interval: str | None = None,
 ) -> dict[str, Any]:
     """A shipped deploy/prometheus config, pointed at test servers; its rule files stay the shipped ones.
 
-    Only the overseer scrape job is kept; `interval`, when given, replaces the scrape and evaluation interval.
+    Only the overseer scrape job is kept, scraping every one of `exporter_urls`; `interval`, when given,
+    replaces the scrape and evaluation interval.
     """
     path = DEPLOY_PROMETHEUS / name
     config: dict[str, Any] = yaml.safe_load(path.read_text(encoding="utf-8"))
     config["rule_files"] = [str((path.parent / rule_file).resolve()) for rule_file in config["rule_files"]]
     config["scrape_configs"] = [job for job in config["scrape_configs"] if job["job_name"] == EXPORTER_JOB]
-    config["scrape_configs"][0]["static_configs"] = [{"targets": [_host_port(exporter_url)]}]
+    targets = [_host_port(url) for url in exporter_urls]
+    config["scrape_configs"][0]["static_configs"] = [{"targets": targets}]
     if alertmanager_url is None:
         del config["alerting"]
     else:

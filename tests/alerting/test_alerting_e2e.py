@@ -166,7 +166,7 @@ def alert_pipeline(
         running_exporter(tmp_path, dds_domain, *exporter_args) as exporter,
     ):
         prometheus_config = shipped_config(
-            profile.prometheus_config, exporter.url, alertmanager.url, profile.interval
+            profile.prometheus_config, [exporter.url], alertmanager.url, profile.interval
         )
         limits = budget(prometheus_config, alertmanager_config, profile)
         with (

@@ -426,7 +426,7 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveFleet]:
         ) as exporter,
         running_simulator(tmp_path, domain, "--robots=3", "--components=10", *events),
     ):
-        config = shipped_config("prometheus.yml", exporter.url, interval="1s")
+        config = shipped_config("prometheus.yml", [exporter.url], interval="1s")
         recording_rules: dict[str, list[str]] = {}
         for rule in (rule for path in config["rule_files"] for rule in load_rules(Path(path))):
             if "record" in rule:

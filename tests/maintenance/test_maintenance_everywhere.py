@@ -106,7 +106,7 @@ def test_one_window_quiets_prometheus_alertmanager_and_icinga_and_every_view_say
             "--fleet.robot-timeout=3s",
         ) as exporter,
     ):
-        prometheus_config = shipped_config("prometheus-fast.yml", exporter.url, alertmanager.url, "1s")
+        prometheus_config = shipped_config("prometheus-fast.yml", [exporter.url], alertmanager.url, "1s")
         prometheus_config["scrape_configs"][0]["basic_auth"] = {
             "username": "prometheus",
             "password": "secret",

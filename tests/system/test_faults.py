@@ -304,7 +304,7 @@ def test_prometheus_frozen_or_killed_and_alertmanager_killed_leave_ingest_untouc
         running_simulator(tmp_path, dds_domain, "--robots=10", f"--rate={rate:g}"),
         running_alertmanager(tmp_path, silent) as alertmanager,
         running_prometheus(
-            tmp_path, shipped_config("prometheus-fast.yml", exporter.url, alertmanager.url, interval="1s")
+            tmp_path, shipped_config("prometheus-fast.yml", [exporter.url], alertmanager.url, interval="1s")
         ) as prometheus,
     ):
         wait_for(lambda: prometheus.query('up{job="overseer"} == 1'), 30, message="Prometheus scraping")
