@@ -68,16 +68,25 @@ def robot_array(level: int, groups: tuple[str, ...] = ("Power", "Motor")) -> Dia
 
 @contextmanager
 def exporter(
-    tmp_path: Path, daemon: Icinga2, exporter_id: str, user: str, robots: list[str], robot_timeout: str = "1h"
+    tmp_path: Path,
+    daemon: Icinga2,
+    exporter_id: str,
+    user: str,
+    robots: list[str],
+    robot_timeout: str = "1h",
+    groups: tuple[str, ...] = ("Power", "Motor"),
 ) -> Iterator[Exporter]:
-    """An in-process exporter pushing `robots` (in its model before the push starts) to `daemon` as `user`."""
+    """An in-process exporter pushing `robots` (in its model before the push starts) to `daemon` as `user`.
+
+    Each robot's first array has a component in each of `groups`.
+    """
     config = push_config(tmp_path, daemon, exporter_id, "1h", timeout="5s", username=user)
     section = json.loads(config.read_text())["icinga2"]
 
     def fill(running: Exporter) -> None:
         assert running.model is not None
         for index, robot in enumerate(robots):
-            running.model.apply(robot, robot_array(2 if index % 3 == 0 else 0), "dds")
+            running.model.apply(robot, robot_array(2 if index % 3 == 0 else 0, groups), "dds")
 
     with in_process_exporter(
         tmp_path,
@@ -161,6 +170,27 @@ def test_a_fleet_first_heard_is_registered_in_one_stage(
     assert {service["package"] for service in services(icinga, "pkg.robot0").values()} == {"overseer-bulk"}
     assert found["pkg.robot0"]["last_check_result"]["output"].startswith("UP - pkg/robot0")
     assert len(stages(icinga, "bulk")) == 1
+
+
+def test_robots_heard_before_their_groups_have_the_group_services_registered_in_one_stage(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # As a fleet declared before it publishes (an inventory, tokens heard first): at 10,000 robots the
+    # group services made one a call took Icinga hours, where one stage takes a minute.
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"early/robot{index}" for index in range(BULK_OBJECTS // 2)]  # a host and a robot service each
+    with exporter(tmp_path, icinga, "early", PUSH_BULK_USER, robots, groups=()) as running:
+        assert running.model is not None
+        wait_for(lambda: all_pushed(icinga, "early.", len(robots), 1), timeout=90, message="the hosts pushed")
+        assert stages_counted(running, "ok") == 1
+        for robot in robots:
+            running.model.apply(robot, robot_array(0), "dds")
+        wait_for(lambda: all_pushed(icinga, "early.", len(robots), 3), timeout=90, message="every group")
+        assert (stages_counted(running, "ok"), stages_counted(running, "rejected")) == (2, 0)
+        assert f"0 hosts and {2 * len(robots)} services registered in one stage" in caplog.text
+    for host in hosts(icinga, "early."):
+        assert {service["package"] for service in services(icinga, host).values()} == {"overseer-early"}
+    assert len(stages(icinga, "early")) == 1  # the first stage removed once the second ran
 
 
 def test_a_restarted_exporter_keeps_its_stage_and_deletes_a_forgotten_robot_with_the_next(

@@ -91,6 +91,7 @@ class Icinga2Push:
         self._package: ConfigPackage | None = ConfigPackage(self._client, config.exporter_id, DEPLOY_SECONDS)
         self._package_paused_until = 0.0
         self._packaged: dict[str, set[str]] = {}  # hosts of the package → their services in it
+        self._unmade_queued = True  # a result was queued since the last look whose object may not exist
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -157,6 +158,8 @@ class Icinga2Push:
                     if service.startswith(GROUP_SERVICE_PREFIX)
                 )
             for result in robot_results(snapshot, robot, kinds, sorted(groups), maintenance):
+                if not self._unmade_queued and not self._made(result.key):
+                    self._unmade_queued = True
                 self._pending.pop(result.key, None)
                 if result.key not in self._urgent:
                     target[result.key] = result
@@ -274,7 +277,7 @@ class Icinga2Push:
                     )
         kept = {host: services for host, services in self._packaged.items() if host not in hosts}
         try:
-            self._deploy(kept, lambda: not self._exists(hosts[0]))
+            self._deploy(kept, lambda: not self._exists(object_path("hosts", hosts[0])))
             self.stats.staged("ok")
         except (PackageRefused, PackageRejected) as error:
             self.stats.staged("refused" if isinstance(error, PackageRefused) else "rejected")
@@ -291,28 +294,25 @@ class Icinga2Push:
             self._to_delete.discard(host)
 
     def _register_in_bulk(self, now: float) -> None:
-        """Register the hosts and services the queued results need in one stage, when they are many."""
-        if self._package is None or now < self._package_paused_until:
+        """Register the objects the queued results need in one stage, when they are many.
+
+        New hosts with their services, and new services of the package's hosts: robots declared before
+        they publish (an inventory, tokens heard first) get their hosts before their groups are known.
+        """
+        if self._package is None or now < self._package_paused_until or not self._unmade_queued:
             return
         assert self._created is not None
-        created, foreign = self._created, self._foreign
-        # Every robot's host made, as almost always once the fleet is registered: no result to look at.
-        unmade = {host for host in self._robot_hosts.values() if host not in created and host not in foreign}
-        if not unmade:
-            return
-        wanted: dict[str, set[str]] = {}
-        for queue in (self._urgent, self._pending):
-            for host, service in queue:
-                if host in unmade:
-                    services = wanted.setdefault(host, set())
-                    if service:
-                        services.add(service)
+        created = self._created
+        wanted = self._unmade_wanted()
         services_wanted = sum(len(services) for services in wanted.values())
-        if len(wanted) + services_wanted < BULK_OBJECTS:
-            return
-        first = next(iter(wanted))
+        hosts_wanted = len(wanted.keys() - created.keys())
+        if hosts_wanted + services_wanted < BULK_OBJECTS:
+            self._unmade_queued = False
+            return  # made one object a call as their results are delivered
+        newest = self._newest(wanted)
+        staged = {host: self._packaged.get(host, set()) | services for host, services in wanted.items()}
         try:
-            self._deploy({**self._packaged, **wanted}, lambda: self._exists(first))
+            self._deploy({**self._packaged, **staged}, lambda: self._exists(newest))
         except PackageRefused as error:
             self.stats.staged("refused")
             log.info(
@@ -335,17 +335,60 @@ class Icinga2Push:
             self._package_paused_until = now + PACKAGE_PAUSE_SECONDS
             return
         self.stats.staged("ok")
-        for host, services in wanted.items():
+        self._unmade_queued = False
+        for host, services in staged.items():
             self._packaged[host] = services
-            self._created[host] = set(services)
+            made = created.setdefault(host, set())
+            made.update(services)
             if self._downtimes is not None:
-                self._downtimes.cover(host, self._created[host])
+                self._downtimes.cover(host, made)
         log.info(
             "Icinga 2: %d hosts and %d services registered in one stage of package %s",
-            len(wanted),
+            hosts_wanted,
             services_wanted,
             self._package.name,
         )
+
+    def _unmade_wanted(self) -> dict[str, set[str]]:
+        """Queued results' objects a stage may register: hosts not made, services missing from our package's.
+
+        A service missing from a host made one object a call stays for a call of its own: Icinga cannot
+        delete (cascading) a host made by a call while a package holds one of its services.
+        """
+        assert self._created is not None
+        created, packaged, foreign = self._created, self._packaged, self._foreign
+        wanted: dict[str, set[str]] = {}
+        for queue in (self._urgent, self._pending):
+            for host, service in queue:
+                made = created.get(host)
+                if made is None:
+                    if host in foreign:
+                        continue
+                    services = wanted.setdefault(host, set())
+                elif not service or service in made or host not in packaged:
+                    continue
+                else:
+                    services = wanted.setdefault(host, set())
+                if service:
+                    services.add(service)
+        return wanted
+
+    def _newest(self, wanted: dict[str, set[str]]) -> str:
+        """The API path of an object the stage adds: once it exists, Icinga runs the stage."""
+        assert self._created is not None
+        for host in wanted:
+            if host not in self._created:
+                return object_path("hosts", host)
+        host, services = next(iter(wanted.items()))
+        return object_path("services", host, min(services))
+
+    def _made(self, key: tuple[str, str]) -> bool:
+        """Whether the object of a result with this key exists, as far as this exporter knows."""
+        if self._created is None:
+            return False
+        host, service = key
+        made = self._created.get(host)
+        return made is not None and (not service or service in made)
 
     def _deploy(self, hosts: dict[str, set[str]], loaded: Callable[[], bool]) -> None:
         """Make `hosts` and their services the package's content; raises what `ConfigPackage.deploy` does."""
@@ -367,12 +410,11 @@ class Icinga2Push:
     def _package_name(self) -> str:
         return "(none)" if self._package is None else self._package.name
 
-    def _exists(self, host: str) -> bool:
-        status, document = self._client.request("GET", object_path("hosts", host), {"attrs": ["name"]})
+    def _exists(self, path: str) -> bool:
+        status, document = self._client.request("GET", path, {"attrs": ["name"]})
         if status not in (200, 404):
-            raise Icinga2Error(
-                f"http_{status}", f"reading host {host}: HTTP {status}: {error_text(document)}", status
-            )
+            reason = error_text(document)
+            raise Icinga2Error(f"http_{status}", f"reading {path}: HTTP {status}: {reason}", status)
         return status == 200
 
     def _push(self, result: CheckResult) -> bool:
