@@ -265,42 +265,46 @@ def test_a_group_that_vanished_is_judged_as_the_check_judges_it(icinga: Icinga2,
 
 
 @pytest.mark.servers
-def test_a_level_change_arrives_at_once(icinga: Icinga2, tmp_path: Path) -> None:
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_level_change_arrives_at_once(icinga: Icinga2, tmp_path: Path, workers: int) -> None:
+    # With ingest workers the push reads their robots' digests and fetches only the robots it pushes.
     domain = fresh_domain_id()
-    config = push_config(tmp_path, icinga, "at-once", "1h")  # the next periodic push is an hour away
+    robot = f"w{workers}robot1"
+    config = push_config(tmp_path, icinga, f"at-once-{workers}", "1h")  # the periodic push is an hour away
+    options = (f"--config.file={config}", f"--ingest.workers={workers}")
     with (
-        running_exporter(tmp_path, domain, f"--config.file={config}") as exporter,
+        running_exporter(tmp_path, domain, *options) as exporter,
         running_simulator(
             tmp_path,
             domain,
             "--robots=1",
-            "--namespace-prefix=brobot",
+            f"--namespace-prefix=w{workers}robot",
             "--warn=0",
             "--error=0",
             "--rate=5",
-            "--event=12:brobot1:/Power/Robot Battery:ERROR",
+            f"--event=12:{robot}:/Power/Robot Battery:ERROR",
         ),
     ):
         wait_for(
-            lambda: (result := pushed(icinga, "brobot1", "ros-diagnostics-Power")) and result.state == 0,
+            lambda: (result := pushed(icinga, robot, "ros-diagnostics-Power")) and result.state == 0,
             timeout=60,
             message="Power OK in Icinga",
         )
 
         def exporter_sees_error() -> bool:
-            robot = exporter.robot("brobot1")
-            return robot is not None and robot["counts"]["error"] > 0
+            document = exporter.robot(robot)
+            return document is not None and document["counts"]["error"] > 0
 
         wait_for(exporter_sees_error, timeout=30, interval=0.05, message="the ERROR in the exporter")
         seen = time.monotonic()
         wait_for(
-            lambda: icinga.result("brobot1", "ros-diagnostics-Power").state == 2,  # type: ignore[union-attr]
+            lambda: icinga.result(robot, "ros-diagnostics-Power").state == 2,  # type: ignore[union-attr]
             timeout=2,
             interval=0.05,
             message="the ERROR in Icinga within 2 s",
         )
         assert time.monotonic() - seen < 2
-        assert icinga.result("brobot1", "ros-diagnostics") == checked(exporter, "brobot1")
+        assert icinga.result(robot, "ros-diagnostics") == checked(exporter, robot)
 
 
 @pytest.mark.servers

@@ -7,6 +7,7 @@ once against this interface and never know which one they read.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -42,6 +43,18 @@ class Fleet(Protocol):
 
     def snapshot(self) -> FleetSnapshot:
         """The whole fleet now; `FleetPartUnavailable` rather than a fleet missing a part."""
+        ...
+
+    def robot_digests(self) -> dict[str, int | None]:
+        """Every robot followed → a number that moves with its up or down or a level; raises as `snapshot`.
+
+        None for a robot awaiting its first word since this start (`level_digests`). Digests are worked
+        out again only for robots that changed, so they are kept between calls: for one reader, the push.
+        """
+        ...
+
+    def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
+        """A snapshot of the robots named that are followed, the others left out; raises as `snapshot`."""
         ...
 
     def exposition_parts(self) -> list[ExpositionPart]:

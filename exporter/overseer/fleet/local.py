@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Collection
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -23,6 +25,7 @@ from overseer.fleet.documents import (
 )
 from overseer.fleet.exposition import ExpositionPart, FleetExposition
 from overseer.fleet.interface import FleetStart
+from overseer.fleet.level_digests import Signatures
 from overseer.fleet.message_labels import MessageLabels
 from overseer.model import FleetModel, FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import EventSink
@@ -61,6 +64,7 @@ class LocalFleet:
         self._stopping = threading.Event()
         self._start = start or FleetStart()
         self._shard = shard or Shard()
+        self._signatures = Signatures()
 
     @classmethod
     def build(
@@ -109,6 +113,16 @@ class LocalFleet:
     def snapshot(self) -> FleetSnapshot:
         """The model now."""
         return self.model.snapshot()
+
+    def robot_digests(self) -> dict[str, int | None]:
+        """Every robot → its digest (None while awaiting), kept from the last call where nothing changed."""
+        return self._signatures.digests(self.model.snapshot())
+
+    def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
+        """The model now, with only the robots named."""
+        snapshot = self.model.snapshot()
+        wanted = set(names)
+        return replace(snapshot, robots=tuple(robot for robot in snapshot.robots if robot.name in wanted))
 
     def exposition_parts(self) -> list[ExpositionPart]:
         """The model's rendered series and counters."""

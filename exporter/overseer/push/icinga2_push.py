@@ -1,13 +1,14 @@
 """The push loop: registers every robot in Icinga 2 and delivers its check results.
 
-It reads `fleet.snapshot()` every tick. A robot whose level (or up/down, or set of components)
-changed has its results queued as urgent at once; every robot's results are queued again every
-`interval`. Pending results are kept as the latest one per host and service, never as a queue of
-every intermediate one, so after an outage Icinga gets the state now. Objects are created on first
-need and marked with `vars.overseer_exporter`; only objects with this exporter's mark are ever
-changed or deleted. Many robots new at once (a fleet first heard) are registered in one stage of the
-exporter's config package (`icinga2_package`) where the ApiUser may, as one object a call would take
-Icinga 2 hours at 10,000 robots.
+It reads the fleet's digests every tick (`fleet.robot_digests()`), then a snapshot of only the robots
+it has results to queue for. A robot whose level (or up/down, or set of components) changed has its
+results queued as urgent at once; every robot's results are queued again every `interval`. Pending
+results are kept as the latest one per host and service, never as a queue of every intermediate one,
+so after an outage Icinga gets the state now. Objects are created on first need and marked with
+`vars.overseer_exporter`; only objects with this exporter's mark are ever changed or deleted. Many
+objects new at once (a fleet first heard, or its groups) are registered in one stage of the exporter's
+config package (`icinga2_package`) where the ApiUser may, as one object a call would take Icinga 2
+hours at 10,000 robots.
 """
 
 from __future__ import annotations
@@ -21,15 +22,15 @@ from typing import Any
 from overseer.config.icinga2 import Icinga2Config
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
 from overseer.maintenance.effects import EffectStats
-from overseer.maintenance.schedule import MaintenanceSchedule
-from overseer.model import FleetSnapshot
+from overseer.maintenance.schedule import MaintenanceSchedule, RobotMaintenance
+from overseer.model import FleetSnapshot, RobotState
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
 from overseer.push.icinga2_downtimes import Icinga2Downtimes
 from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
-from overseer.push.icinga2_results import CheckResult, Signatures, awaiting, robot_groups, robot_results
+from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
@@ -77,8 +78,7 @@ class Icinga2Push:
         self._thread: threading.Thread | None = None
         self._urgent: dict[tuple[str, str], CheckResult] = {}
         self._pending: dict[tuple[str, str], CheckResult] = {}
-        self._signatures: dict[str, tuple[object, ...]] = {}
-        self._levels = Signatures()
+        self._signatures: dict[str, tuple[int, RobotMaintenance | None]] = {}  # robot → digest, maintenance
         self._due: dict[str, float] = {}
         self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
         self._robot_hosts: dict[str, str] = {}  # robot → host, for every robot being pushed
@@ -119,7 +119,7 @@ class Icinga2Push:
         """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off."""
         now = self._clock()
         try:
-            self._queue(self._fleet.snapshot(), now)
+            self._queue(now)
         except FleetPartUnavailable as error:
             # A robot missing from a partial snapshot is no robot gone: wait for the whole fleet.
             log.info("Icinga 2 push: not queueing this tick, %s", error)
@@ -127,50 +127,26 @@ class Icinga2Push:
             self._deliver(now)
         self.stats.set_pending(len(self._urgent) + len(self._pending))
 
-    def _queue(self, snapshot: FleetSnapshot, now: float) -> None:
-        present = set()
-        kinds = self._config.services
+    def _queue(self, now: float) -> None:
+        digests = self._fleet.robot_digests()
         schedule = self._maintenance
         active = [] if schedule is None else schedule.active(schedule.clock())
-        for robot in snapshot.robots:
-            present.add(robot.name)
-            if awaiting(snapshot, robot):
+        signatures: dict[str, tuple[int, RobotMaintenance | None]] = {}
+        for name, digest in digests.items():
+            if digest is None:
                 continue  # what it reports is unknown until it speaks again: Icinga keeps its last results
-            state = None if schedule is None else schedule.state(robot.name, active)
-            maintenance = (
-                None if state is None else Maintenance(state.window, state.until, state.author, state.comment)
-            )
-            signature = (*self._levels.of(snapshot, robot), state)
-            changed = signature != self._signatures.get(robot.name)
-            if not changed and now < self._due.get(robot.name, 0.0):
-                continue
-            host = self._robot_hosts.setdefault(robot.name, host_name(robot.name))
-            self._labels.want(host, robot.listing.labels if robot.listing is not None else ())
-            self._orphans.pop(host, None)
-            self._to_delete.discard(host)
-            target = self._urgent if changed else self._pending
-            groups = self._groups.setdefault(robot.name, set())
-            groups.update(robot_groups(robot))
-            if self._created is not None:  # and those whose services an earlier run of ours made
-                groups.update(
-                    original_name(service.removeprefix(GROUP_SERVICE_PREFIX))
-                    for service in self._created.get(host, ())
-                    if service.startswith(GROUP_SERVICE_PREFIX)
-                )
-            for result in robot_results(snapshot, robot, kinds, sorted(groups), maintenance):
-                if not self._unmade_queued and not self._made(result.key):
-                    self._unmade_queued = True
-                self._pending.pop(result.key, None)
-                if result.key not in self._urgent:
-                    target[result.key] = result
-                else:
-                    self._urgent[result.key] = result
-            self._signatures[robot.name] = signature
-            self._due[robot.name] = now + self._config.interval
-        for gone in [name for name in self._robot_hosts if name not in present]:
+            signature = (digest, None if schedule is None else schedule.state(name, active))
+            if signature != self._signatures.get(name) or now >= self._due.get(name, 0.0):
+                signatures[name] = signature
+        if signatures:
+            # Only these robots: at 10,000 robots over ingest workers the whole fleet is tens of megabytes
+            # to pickle every look. One that changed again since its digest shows it at the next look.
+            snapshot = self._fleet.robots_snapshot(signatures)
+            for robot in snapshot.robots:
+                self._queue_robot(snapshot, robot, signatures[robot.name], now)
+        for gone in [name for name in self._robot_hosts if name not in digests]:
             host = self._robot_hosts.pop(gone)
             self._signatures.pop(gone, None)
-            self._levels.forget(gone)
             self._due.pop(gone, None)
             self._groups.pop(gone, None)
             self._labels.forget(host)
@@ -179,6 +155,43 @@ class Icinga2Push:
                     del queue[key]
             self._to_delete.add(host)
             log.info("robot %s was forgotten: deleting its Icinga 2 objects", gone)
+
+    def _queue_robot(
+        self,
+        snapshot: FleetSnapshot,
+        robot: RobotState,
+        signature: tuple[int, RobotMaintenance | None],
+        now: float,
+    ) -> None:
+        """Queue `robot`'s results: urgent when its signature changed, else as the interval's repeat."""
+        changed = signature != self._signatures.get(robot.name)
+        state = signature[1]
+        maintenance = (
+            None if state is None else Maintenance(state.window, state.until, state.author, state.comment)
+        )
+        host = self._robot_hosts.setdefault(robot.name, host_name(robot.name))
+        self._labels.want(host, robot.listing.labels if robot.listing is not None else ())
+        self._orphans.pop(host, None)
+        self._to_delete.discard(host)
+        target = self._urgent if changed else self._pending
+        groups = self._groups.setdefault(robot.name, set())
+        groups.update(robot_groups(robot))
+        if self._created is not None:  # and those whose services an earlier run of ours made
+            groups.update(
+                original_name(service.removeprefix(GROUP_SERVICE_PREFIX))
+                for service in self._created.get(host, ())
+                if service.startswith(GROUP_SERVICE_PREFIX)
+            )
+        for result in robot_results(snapshot, robot, self._config.services, sorted(groups), maintenance):
+            if not self._unmade_queued and not self._made(result.key):
+                self._unmade_queued = True
+            self._pending.pop(result.key, None)
+            if result.key not in self._urgent:
+                target[result.key] = result
+            else:
+                self._urgent[result.key] = result
+        self._signatures[robot.name] = signature
+        self._due[robot.name] = now + self._config.interval
 
     def _deliver(self, now: float) -> None:
         deadline = now + BATCH_SECONDS

@@ -62,6 +62,11 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
     if kind == "snapshot":
         snapshot = fleet.snapshot()
         return replace(snapshot, robots=tuple(portable_robots(snapshot)))
+    if kind == "digests":
+        return fleet.robot_digests()
+    if kind == "snapshot_of":
+        snapshot = fleet.robots_snapshot(argument)
+        return replace(snapshot, robots=tuple(portable_robots(snapshot)))
     if kind == "inventory":
         fleet.set_inventory(argument)
         return None

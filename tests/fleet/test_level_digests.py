@@ -1,0 +1,87 @@
+"""Kept signatures are always what working each robot out again gives; digests move with them alone."""
+
+from __future__ import annotations
+
+import time
+
+from overseer.fleet.level_digests import Signatures, robot_signature
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel, RememberedRobot
+from support.clock import ManualClock
+
+
+def array(*levels: int, message: str = "m") -> DiagnosticArray:
+    """An aggregator's array, one component a level."""
+    statuses = tuple(
+        DiagnosticStatus(level, f"/Power/part{i}", message, "hw", ()) for i, level in enumerate(levels)
+    )
+    return DiagnosticArray(0, 0, "", statuses)
+
+
+def test_kept_signatures_follow_levels_staleness_down_and_a_robot_followed_again() -> None:
+    clock = ManualClock(100.0)
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, stale_periods=1), clock=clock)
+    signatures = Signatures()
+    seen = []
+
+    def look() -> None:
+        # Twice: now, and a little later with nothing heard (the versions looked at last, kept).
+        for _ in range(2):
+            snapshot = model.snapshot()
+            for robot in snapshot.robots:
+                kept = signatures.of(snapshot, robot)
+                assert kept == robot_signature(snapshot, robot), (robot.name, clock.now)
+                seen.append(kept)
+            clock.now += 0.5
+
+    model.apply("a", array(0, 0), "dds")
+    model.apply("b", array(0, 0), "dds")
+    look()
+    clock.now += 1
+    model.apply("a", array(0, 0), "dds")  # the same again
+    look()
+    model.apply("a", array(0, 2), "dds")  # a level changed
+    look()
+    clock.now += 3.5  # b's components STALE a moment after this look, not heard since
+    look()
+    model.apply("a", array(0, 2), "dds")
+    look()
+    clock.now += 30  # b down
+    model.apply("a", array(0, 2), "dds")
+    look()
+    assert model.retire("b") == "retired"
+    signatures.forget("b")
+    model.apply("b", array(1), "dds")  # followed again, its revisions start over
+    look()
+    assert len(set(seen)) >= 5
+
+
+def test_digests_move_with_a_level_or_a_robot_down_and_not_with_a_message() -> None:
+    clock = ManualClock(100.0)
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10, stale_periods=1), clock=clock)
+    signatures = Signatures()
+    model.apply("a", array(0, 0), "dds")
+    model.apply("b", array(0, 0), "dds")
+    first = signatures.digests(model.snapshot())
+    assert set(first) == {"a", "b"} and None not in first.values()
+    model.apply("a", array(0, 0, message="other words, same levels"), "dds")
+    assert signatures.digests(model.snapshot()) == first
+    model.apply("a", array(0, 1), "dds")
+    changed = signatures.digests(model.snapshot())
+    assert changed["a"] != first["a"] and changed["b"] == first["b"]
+    clock.now += 30  # both down
+    model.apply("a", array(0, 1), "dds")
+    down = signatures.digests(model.snapshot())
+    assert down["a"] == changed["a"] and down["b"] != changed["b"]
+    assert model.retire("b") == "retired"
+    assert set(signatures.digests(model.snapshot())) == {"a"}  # and b's kept signature is dropped
+
+
+def test_a_robot_remembered_from_before_the_start_has_no_digest_until_it_speaks() -> None:
+    clock = ManualClock(100.0)
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=10), clock=clock)
+    model.remember([RememberedRobot("r", "dds", time.time() - 1)])
+    signatures = Signatures()
+    assert signatures.digests(model.snapshot()) == {"r": None}
+    model.apply("r", array(0), "dds")
+    assert isinstance(signatures.digests(model.snapshot())["r"], int)
