@@ -20,6 +20,7 @@ import pytest
 
 from overseer.config import ConfigError
 from overseer.config.icinga2 import icinga2_config
+from overseer.push.icinga2_client import Icinga2Client, object_path
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_push import HOST_SILENT_TEXT
 from testbed.icinga2 import (
@@ -138,6 +139,31 @@ def test_an_incomplete_icinga2_section_names_the_key(
     with pytest.raises(ConfigError) as raised:
         icinga2_config({key: value for key, value in section.items() if value is not None})
     assert str(raised.value).startswith(message), raised.value
+
+
+@pytest.mark.servers
+def test_results_sent_in_one_write_get_their_own_answers_in_order(icinga: Icinga2, tmp_path: Path) -> None:
+    section = json.loads(push_config(tmp_path, icinga, "piped", "1h").read_text())["icinga2"]
+    client = Icinga2Client(icinga2_config(section))
+    marks = {"check_command": "dummy", "vars.overseer_managed": True, "enable_active_checks": False}
+    for host in ("piped.a", "piped.b"):
+        client.expect("PUT", object_path("hosts", host), {"attrs": marks})
+
+    def result(host: str, state: int) -> dict[str, object]:
+        return {"type": "Host", "host": host, "exit_status": state, "plugin_output": f"{host} {state}"}
+
+    bodies = [result("piped.a", 1), result("piped.none", 0), result("piped.b", 0), result("piped.a", 0)]
+    try:
+        answers, error = client.pipeline("/v1/actions/process-check-result", bodies)
+        assert error is None
+        assert [status for status, _ in answers] == [200, 404, 200, 200]
+        assert "piped.b" in answers[2][1]["results"][0]["status"]  # each answer is its own request's
+        host = icinga.api("GET", "/v1/objects/hosts", {"host": "piped.a"})["results"][0]["attrs"]
+        assert host["last_check_result"]["output"] == "piped.a 0"  # the last one sent for it
+        again, error = client.pipeline("/v1/actions/process-check-result", [result("piped.b", 1)])
+        assert (error, [status for status, _ in again]) == (None, [200])  # the same connection goes on
+    finally:
+        client.close()
 
 
 @pytest.mark.servers

@@ -13,6 +13,7 @@ hours at 10,000 robots.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
@@ -36,8 +37,11 @@ from overseer.verdict import Maintenance
 
 log = logging.getLogger(__name__)
 
+ResultKey = tuple[str, str]  # a host, and one of its services or '' for the host itself
+
 TICK_SECONDS = 0.25
 BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the fleet again
+PIPELINED_RESULTS = 50  # results sent in one write, their answers read after
 SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 # Active checks only run once a pushed result's TTL ran out; then `dummy` says the exporter is silent.
@@ -208,11 +212,9 @@ class Icinga2Push:
             attempted = 0
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):
-                    key, result = next(iter(queue.items()))
-                    attempted += 1
-                    if self._push(result):
-                        self.stats.delivered(1, time.time())
-                    del queue[key]
+                    batch = list(itertools.islice(queue.items(), PIPELINED_RESULTS))
+                    attempted += len(batch)
+                    self._push(batch, queue)
         except Icinga2Error as error:
             self._failed(error, now)
             return
@@ -430,15 +432,40 @@ class Icinga2Push:
             raise Icinga2Error(f"http_{status}", f"reading {path}: HTTP {status}: {reason}", status)
         return status == 200
 
-    def _push(self, result: CheckResult) -> bool:
-        """Deliver one result, creating its host or service first; False when it was dropped."""
+    def _push(self, batch: list[tuple[ResultKey, CheckResult]], queue: dict[ResultKey, CheckResult]) -> None:
+        """Deliver `batch` in one pipelined write, objects created first; settled results leave `queue`.
+
+        Raises Icinga2Error for the first result Icinga failed, or when its answers stopped: that result
+        and those after it stay queued.
+        """
+        sent: list[tuple[ResultKey, CheckResult]] = []
+        bodies = []
+        for key, result in batch:
+            body = self._body(result)
+            if body is None:
+                del queue[key]  # dropped: not ours to push
+            else:
+                sent.append((key, result))
+                bodies.append(body)
+        answers, error = self._client.pipeline("/v1/actions/process-check-result", bodies)
+        delivered = 0
+        for (key, result), (status, document) in zip(sent, answers, strict=False):
+            delivered += self._settled(result, status, document)
+            del queue[key]
+        if delivered:
+            self.stats.delivered(delivered, time.time())
+        if error is not None:
+            raise error
+
+    def _body(self, result: CheckResult) -> dict[str, Any] | None:
+        """The result's `process-check-result` body, its host or service created first; None when dropped."""
         assert self._created is not None
         if result.host in self._foreign:
-            return False
+            return None
         made = result.host not in self._created
         attrs = self._host_attrs(result.host, self._labels.variables(result.host)) if made else {}
         if made and not self._create("hosts", result.host, "", attrs):
-            return False
+            return None
         if result.service and result.service not in self._created[result.host]:
             made = self._create("services", result.host, result.service, self._service_attrs()) or made
         if made and self._downtimes is not None:  # in its window's downtime before its first result
@@ -455,11 +482,15 @@ class Icinga2Push:
             body["service"] = f"{result.host}!{result.service}"
         else:
             body["host"] = result.host
-        status, document = self._client.request("POST", "/v1/actions/process-check-result", body)
+        return body
+
+    def _settled(self, result: CheckResult, status: int, document: Any) -> bool:
+        """Whether Icinga took the result; a 404 is forgotten (made again next time), other failures raise."""
+        assert self._created is not None
         if status == 404:  # deleted behind our back (or Icinga lost it): create it again next time
             self.stats.failed("http_404")
             if result.service:
-                self._created[result.host].discard(result.service)
+                self._created.get(result.host, set()).discard(result.service)
             else:
                 self._created.pop(result.host, None)
                 self._packaged.pop(result.host, None)  # the package is gone too, or a stage would clash
