@@ -107,6 +107,9 @@ class Icinga2Client:
                 reader = _SharedReader(sock.makefile("rb"))
                 try:
                     while len(answers) < len(bodies):
+                        # Icinga writes each answer apart: left to the kernel's delayed ACK (40 ms), Nagle's
+                        # wait on Icinga's side held the batch's answers back about 44 ms a batch.
+                        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
                         response = http.client.HTTPResponse(reader)  # type: ignore[arg-type]
                         response.begin()
                         answers.append((response.status, _parsed(response.read())))
