@@ -17,7 +17,6 @@ from urllib.parse import quote
 from overseer.config.icinga2 import Icinga2Config
 
 Answer = tuple[int, Any]  # an HTTP status and the answer's JSON document (None when it has none)
-_STALE_CONNECTION = (http.client.RemoteDisconnected, BrokenPipeError, ConnectionResetError)
 
 
 class Icinga2Error(Exception):
@@ -99,8 +98,9 @@ class Icinga2Client:
         answers: list[Answer] = []
         for attempt in (1, 2):  # a kept-alive connection the server closed fails once; retry on a new one
             connection = self._connect()
+            kept_alive = connection.sock is not None
             try:
-                if connection.sock is None:
+                if not kept_alive:
                     connection.connect()
                 sock = connection.sock
                 sock.sendall(b"".join(requests))
@@ -122,13 +122,16 @@ class Icinga2Client:
                 return answers, Icinga2Error(
                     "timeout", f"no answer from {self._config.url} within {self._config.timeout:g}s"
                 )
-            except ssl.SSLError as error:
+            except (http.client.HTTPException, OSError) as error:  # ssl.SSLError among them
                 self.close()
-                return answers, Icinga2Error("tls", f"TLS with {self._config.url} failed: {error.reason}")
-            except (http.client.HTTPException, OSError) as error:
-                self.close()
-                if attempt == 1 and not answers and isinstance(error, _STALE_CONNECTION):
+                if attempt == 1 and not answers and kept_alive:
+                    # Icinga closes a connection idle for 10 s: a batch finds it gone in more ways than one
+                    # request does (a TLS error while the batch is being written, under load).
                     continue
+                if isinstance(error, ssl.SSLError):
+                    return answers, Icinga2Error(
+                        "tls", f"TLS with {self._config.url} failed: {tls_reason(error)}"
+                    )
                 text = getattr(error, "strerror", None) or str(error) or type(error).__name__
                 return answers, Icinga2Error("connection", f"cannot reach {self._config.url}: {text}")
             if len(answers) < len(bodies):  # the server closed the connection after this answer
@@ -159,7 +162,9 @@ class Icinga2Client:
                 ) from None
             except ssl.SSLError as error:
                 self.close()
-                raise Icinga2Error("tls", f"TLS with {self._config.url} failed: {error.reason}") from None
+                raise Icinga2Error(
+                    "tls", f"TLS with {self._config.url} failed: {tls_reason(error)}"
+                ) from None
             except (http.client.HTTPException, OSError) as error:
                 self.close()
                 if attempt == 1 and isinstance(error, (http.client.RemoteDisconnected, BrokenPipeError)):
@@ -225,6 +230,11 @@ def _parsed(payload: bytes) -> Any:
         return json.loads(payload) if payload else None
     except ValueError:
         return None
+
+
+def tls_reason(error: ssl.SSLError) -> str:
+    """OpenSSL's reason for a TLS error, or Python's words where OpenSSL gave none (an EOF, a reset)."""
+    return str(error.reason or error or type(error).__name__)
 
 
 def error_text(document: Any) -> str:
