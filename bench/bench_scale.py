@@ -82,6 +82,7 @@ from bench.loadgen import (
 )
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
+from bench.scale_icinga2 import icinga2_receiving
 from bench.zenoh_counter import CounterProcess, running_counter
 from overseer.config.ingest import MAX_INGEST_WORKERS
 from overseer.model.shard import Shard
@@ -552,6 +553,7 @@ def run(
     floor_pieces: bool = False,
     shards: int = 1,
     store: str | None = None,
+    icinga2_interval: float | None = None,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
@@ -563,6 +565,7 @@ def run(
     `floor_pieces`: Prometheus also scrapes the floor's text gzipped as the exporter gzips it.
     `shards`: that many exporters (`--shard I/N`, `workers` each) share the fleet; the figures are theirs
     together. `store`: Prometheus scrapes in agent mode and sends the samples to that store (STORES).
+    `icinga2_interval`: the exporter pushes the fleet to a real Icinga 2 every that many seconds.
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
@@ -579,6 +582,7 @@ def run(
     with (
         tempfile.TemporaryDirectory() as tmp,
         wiring(transport, Path(tmp)) as wires,
+        icinga2_receiving(Path(tmp), icinga2_interval) as icinga2,
         running_shards(
             Path(tmp),
             wires,
@@ -587,6 +591,7 @@ def run(
             # Headroom, not a limit: the probe robot comes on top of the fleet.
             f"--fleet.max-robots={max(DEFAULT_MAX_ROBOTS, 2 * robots)}",
             "--log.level=warning",
+            *([icinga2.option] if icinga2 else []),
             *exporter_options,
         ) as exporters,
         floor_counter(wires, Path(tmp), floor) as counter,
@@ -613,6 +618,7 @@ def run(
                 # Steady: from the window's middle (the first look long over) to the check's runs.
                 time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
                 steady_from, steady_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
+                pushing_from = icinga2.mark() if icinga2 else None
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
                 steady_rss = highest_tree_resident(pids, steady_until)
                 steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
@@ -647,6 +653,7 @@ def run(
         cpu = forest(tree_cpu_seconds, pids) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
         texts = [metrics_text(exporter.url) for exporter in exporters]
+        push_rows = icinga2.rows(pushing_from, texts[0]) if icinga2 and pushing_from else []
         counts = together([counted(text, transport) for text in texts])
         followed = [followed_robots(text) for text in texts]
         probed = probe.published if probe else 0
@@ -788,7 +795,7 @@ def run(
         Row("scale", f"{label}: /metrics read", scrape_seconds, "s"),  # the slowest shard's
         Row("scale", f"{label}: /metrics body", scrape_bytes / 1e6, "MB"),  # every shard's
         *(probe.rows(label) if probe else []),
-    ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows]
+    ] + [replace(row, figure=f"{label}: {row.figure}") for row in checks + prometheus_rows + push_rows]
 
 
 def positive_counts(flag: str, text: str, most: int | None = None) -> list[int]:
@@ -824,6 +831,10 @@ def check_window(options: argparse.Namespace) -> None:
     if not 1 <= options.shards <= MAX_SHARDS:
         raise ValueError(f"--shards: must be from 1 to {MAX_SHARDS}, got {options.shards}")
     check_head_start(options.head_start)
+    if options.icinga2 is not None and not options.icinga2 > 0:
+        raise ValueError(f"--icinga2: the push's interval must be positive, got {options.icinga2}")
+    if options.icinga2 is not None and options.shards > 1:
+        raise ValueError("--icinga2: with one exporter only (each shard would push as its own exporter)")
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
 
@@ -884,6 +895,14 @@ def main(argv: Sequence[str] | None = None) -> None:
         metavar="STORE",
         help=f"Prometheus scrapes as an agent into STORE ({' or '.join(STORES)}; --prometheus-seconds)",
     )
+    parser.add_argument(
+        "--icinga2",
+        nargs="?",
+        const=60.0,
+        type=float,
+        metavar="SECONDS",
+        help="the exporter pushes the fleet to a real Icinga 2 every SECONDS (default 60)",
+    )
     add_shape_arguments(parser)
     options = parser.parse_args(argv)
     try:  # before any server starts: a run refused after minutes of setup measures nothing
@@ -912,6 +931,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.floor_pieces,
                 options.shards,
                 options.prometheus_agent,
+                options.icinga2,
             )
     emit(rows)
 

@@ -133,3 +133,21 @@ def test_the_probe_check_and_page_read_the_shard_that_follows_their_robot() -> N
         (owner,) = [shard for index, shard in enumerate(shards) if Shard(index, 3).owns(robot)]
         assert shard_of(shards, robot) == owner
     assert {shard_of(shards, robot) for robot in robots} == set(shards)
+
+
+def test_the_fleet_pushed_to_a_real_icinga2_is_counted_as_icinga_received_it() -> None:
+    shape = FleetShape(robots=ROBOTS, components=COMPONENTS)
+    # Long enough for Icinga's last minute to be one of pushing every robot, registered in the first seconds.
+    rows = {row.figure: row for row in run(shape, workers=2, seconds=75.0, icinga2_interval=10.0)}
+    label = "20 robots x 20, realistic, zenoh, 2 workers"
+
+    def row(figure: str) -> Row:
+        return rows[f"{label}: Icinga 2 push every 10 s: {figure}"]
+
+    # A host, its robot service and a service a group (five) for each robot and the probe's.
+    assert row("hosts and services registered").value == (ROBOTS + 1) * 7
+    assert row("config package stages (registering robots and their groups)").value >= 1
+    received = row("of those due a minute (every object once an interval)")
+    assert received.met and received.value >= 0.95, received
+    assert row("requests failed").value == 0 and row("requests failed").met
+    assert row("Icinga 2's CPU").value > 0

@@ -29,6 +29,8 @@ from bench.bench_scale import main
         (["--prometheus-agent"], "--prometheus-agent: needs --prometheus-seconds"),
         (["--shards=0"], "--shards: must be from 1 to 8, got 0"),
         (["--shards=9"], "--shards: must be from 1 to 8, got 9"),
+        (["--icinga2=0"], "--icinga2: the push's interval must be positive, got 0.0"),
+        (["--icinga2", "--shards=2"], "--icinga2: with one exporter only"),
     ],
 )
 def test_a_run_that_cannot_be_measured_is_refused_with_the_flag_named(
