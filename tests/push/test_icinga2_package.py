@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,6 +20,7 @@ import pytest
 
 from overseer.app import Exporter
 from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetSnapshot
 from overseer.push.icinga2_names import host_name
 from overseer.push.icinga2_package import dsl_string, object_text, package_name
 from overseer.push.icinga2_push import BULK_OBJECTS
@@ -173,7 +175,7 @@ def test_a_fleet_first_heard_is_registered_in_one_stage(
 
 
 def test_robots_heard_before_their_groups_have_the_group_services_registered_in_one_stage(
-    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # As a fleet declared before it publishes (an inventory, tokens heard first): at 10,000 robots the
     # group services made one a call took Icinga hours, where one stage takes a minute.
@@ -183,8 +185,18 @@ def test_robots_heard_before_their_groups_have_the_group_services_registered_in_
         assert running.model is not None
         wait_for(lambda: all_pushed(icinga, "early.", len(robots), 1), timeout=90, message="the hosts pushed")
         assert stages_counted(running, "ok") == 1
-        for robot in robots:
-            running.model.apply(robot, robot_array(0), "dds")
+        # Every robot's groups at once, as the push looks: no look between two robots' arrays.
+        gate = threading.RLock()
+        snapshot = running.model.snapshot
+
+        def gated() -> FleetSnapshot:
+            with gate:
+                return snapshot()
+
+        monkeypatch.setattr(running.model, "snapshot", gated)
+        with gate:
+            for robot in robots:
+                running.model.apply(robot, robot_array(0), "dds")
         wait_for(lambda: all_pushed(icinga, "early.", len(robots), 3), timeout=90, message="every group")
         assert (stages_counted(running, "ok"), stages_counted(running, "rejected")) == (2, 0)
         assert f"0 hosts and {2 * len(robots)} services registered in one stage" in caplog.text

@@ -54,12 +54,11 @@ class _Known(NamedTuple):
     until: float  # until when (monotonic) that version's up and staleness hold
     key: tuple[object, ...]  # its revision, up and staleness
     timing: RobotTiming
-    signature: tuple[object, ...]
-    digest: int
+    digest: int  # its signature's
 
 
 class Signatures:
-    """Each robot's `robot_signature`, worked out again only when a revision, up or staleness changed.
+    """Each robot's `robot_signature` digest, worked out again only when a revision, up or staleness changed.
 
     At 10,000 robots, working every one out at every look of the push took a third of a core: a robot
     republishing the same array keeps its revision, its staleness holds between messages, and a robot
@@ -71,16 +70,13 @@ class Signatures:
         """Nothing known yet."""
         self._known: dict[str, _Known] = {}
 
-    def of(self, snapshot: FleetSnapshot, robot: RobotState) -> tuple[object, ...]:
-        """`robot_signature(snapshot, robot)`, from what was kept when nothing it depends on changed."""
-        return self._look(snapshot, robot).signature
-
     def digests(self, snapshot: FleetSnapshot) -> dict[str, int | None]:
         """Every robot of `snapshot` → its signature's digest, None while it is `awaiting`.
 
         Robots no longer in the snapshot are forgotten. A digest is the signature's hash: equal
         signatures give equal digests within one process (not across processes, whose string hashes
-        differ), and different ones differ but for a chance in 2**64.
+        differ: a restarted ingest worker's robots look changed once), and different ones differ but for
+        a chance in 2**64.
         """
         known = self._known
         self._known = {}
@@ -90,10 +86,6 @@ class Signatures:
                 self._known[robot.name] = known[robot.name]
             digests[robot.name] = None if awaiting(snapshot, robot) else self._look(snapshot, robot).digest
         return digests
-
-    def forget(self, name: str) -> None:
-        """A robot gone from the fleet."""
-        self._known.pop(name, None)
 
     def _look(self, snapshot: FleetSnapshot, robot: RobotState) -> _Known:
         known = self._known.get(robot.name)
@@ -107,7 +99,6 @@ class Signatures:
         if known is not None and known.key == key:
             kept = known._replace(robot=robot, until=until)
         else:
-            signature = robot_signature(snapshot, robot)
-            kept = _Known(robot, until, key, timing, signature, hash(signature))
+            kept = _Known(robot, until, key, timing, hash(robot_signature(snapshot, robot)))
         self._known[robot.name] = kept
         return kept

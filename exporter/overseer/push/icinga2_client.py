@@ -16,7 +16,10 @@ from urllib.parse import quote
 
 from overseer.config.icinga2 import Icinga2Config
 
-Answer = tuple[int, Any]  # an HTTP status and the answer's JSON document (None when it has none)
+Reply = tuple[int, Any]  # an HTTP status and the answer's JSON document (None when it has none)
+
+
+_QUICKACK: int | None = getattr(socket, "TCP_QUICKACK", None)  # Linux's
 
 
 class Icinga2Error(Exception):
@@ -80,7 +83,7 @@ class Icinga2Client:
         status, payload = self._exchange(method, path, data, headers)
         return status, _parsed(payload)
 
-    def pipeline(self, path: str, bodies: list[dict[str, Any]]) -> tuple[list[Answer], Icinga2Error | None]:
+    def pipeline(self, path: str, bodies: list[dict[str, Any]]) -> tuple[list[Reply], Icinga2Error | None]:
         """POST every body to `path` in one write, then read the answers in order (HTTP/1.1 pipelining).
 
         The answers read, as `request` gives them, and the error that ended the reading early (None when
@@ -89,13 +92,14 @@ class Icinga2Client:
         """
         if not bodies:
             return [], None
-        head = f"POST {path} HTTP/1.1\r\nHost: {self._config.host}:{self._config.port}\r\n"
+        host = f"[{self._config.host}]" if ":" in self._config.host else self._config.host  # IPv6
+        head = f"POST {path} HTTP/1.1\r\nHost: {host}:{self._config.port}\r\n"
         head += "".join(f"{name}: {value}\r\n" for name, value in self._headers.items())
         requests = []
         for body in bodies:
             data = json.dumps(body).encode()
             requests.append(f"{head}Content-Length: {len(data)}\r\n\r\n".encode() + data)
-        answers: list[Answer] = []
+        answers: list[Reply] = []
         for attempt in (1, 2):  # a kept-alive connection the server closed fails once; retry on a new one
             connection = self._connect()
             kept_alive = connection.sock is not None
@@ -109,7 +113,8 @@ class Icinga2Client:
                     while len(answers) < len(bodies):
                         # Icinga writes each answer apart: left to the kernel's delayed ACK (40 ms), Nagle's
                         # wait on Icinga's side held the batch's answers back about 44 ms a batch.
-                        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
+                        if _QUICKACK is not None:
+                            sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
                         response = http.client.HTTPResponse(reader)  # type: ignore[arg-type]
                         response.begin()
                         answers.append((response.status, _parsed(response.read())))
@@ -134,8 +139,9 @@ class Icinga2Client:
                     )
                 text = getattr(error, "strerror", None) or str(error) or type(error).__name__
                 return answers, Icinga2Error("connection", f"cannot reach {self._config.url}: {text}")
-            if len(answers) < len(bodies):  # the server closed the connection after this answer
+            if response.will_close:
                 self.close()
+            if len(answers) < len(bodies):  # the server closed the connection after this answer
                 return answers, Icinga2Error(
                     "connection", f"{self._config.url} closed the connection after {len(answers)} answers"
                 )
@@ -234,7 +240,7 @@ def _parsed(payload: bytes) -> Any:
 
 def tls_reason(error: ssl.SSLError) -> str:
     """OpenSSL's reason for a TLS error, or Python's words where OpenSSL gave none (an EOF, a reset)."""
-    return str(error.reason or error or type(error).__name__)
+    return str(error.reason or str(error) or type(error).__name__)
 
 
 def error_text(document: Any) -> str:

@@ -213,8 +213,7 @@ class Icinga2Push:
             for queue in (self._urgent, self._pending):
                 while queue and (attempted == 0 or self._clock() < deadline):
                     batch = list(itertools.islice(queue.items(), PIPELINED_RESULTS))
-                    attempted += len(batch)
-                    self._push(batch, queue)
+                    attempted += self._push(batch, queue, deadline)
         except Icinga2Error as error:
             self._failed(error, now)
             return
@@ -402,6 +401,8 @@ class Icinga2Push:
         if self._created is None:
             return False
         host, service = key
+        if host in self._foreign:
+            return True  # never pushed: nothing to register
         made = self._created.get(host)
         return made is not None and (not service or service in made)
 
@@ -432,15 +433,22 @@ class Icinga2Push:
             raise Icinga2Error(f"http_{status}", f"reading {path}: HTTP {status}: {reason}", status)
         return status == 200
 
-    def _push(self, batch: list[tuple[ResultKey, CheckResult]], queue: dict[ResultKey, CheckResult]) -> None:
+    def _push(
+        self, batch: list[tuple[ResultKey, CheckResult]], queue: dict[ResultKey, CheckResult], deadline: float
+    ) -> int:
         """Deliver `batch` in one pipelined write, objects created first; settled results leave `queue`.
 
-        Raises Icinga2Error for the first result Icinga failed, or when its answers stopped: that result
-        and those after it stay queued.
+        The results looked at: those after `deadline` stay queued when objects made one a call took the
+        time (a level change waits for no more than one). Raises Icinga2Error for the first result Icinga
+        failed, or when its answers stopped: that result and those after it stay queued.
         """
         sent: list[tuple[ResultKey, CheckResult]] = []
         bodies = []
+        looked = 0
         for key, result in batch:
+            if looked and self._clock() >= deadline:
+                break
+            looked += 1
             body = self._body(result)
             if body is None:
                 del queue[key]  # dropped: not ours to push
@@ -449,13 +457,16 @@ class Icinga2Push:
                 bodies.append(body)
         answers, error = self._client.pipeline("/v1/actions/process-check-result", bodies)
         delivered = 0
-        for (key, result), (status, document) in zip(sent, answers, strict=False):
-            delivered += self._settled(result, status, document)
-            del queue[key]
-        if delivered:
-            self.stats.delivered(delivered, time.time())
+        try:
+            for (key, result), (status, document) in zip(sent, answers, strict=False):
+                delivered += self._settled(result, status, document)
+                del queue[key]
+        finally:
+            if delivered:
+                self.stats.delivered(delivered, time.time())
         if error is not None:
             raise error
+        return looked
 
     def _body(self, result: CheckResult) -> dict[str, Any] | None:
         """The result's `process-check-result` body, its host or service created first; None when dropped."""
