@@ -41,20 +41,17 @@ class Fleet(Protocol):
         """Stop following robots and release everything."""
         ...
 
-    def snapshot(self) -> FleetSnapshot:
-        """The whole fleet now; `FleetPartUnavailable` rather than a fleet missing a part."""
-        ...
-
     def robot_digests(self) -> dict[str, int | None]:
-        """Every robot followed → a number that moves with its up or down or a level; raises as `snapshot`.
+        """Every robot followed → a number that moves with its up or down or a level.
 
         None for a robot awaiting its first word since this start (`level_digests`). Digests are worked
         out again only for robots that changed, so they are kept between calls: for one reader, the push.
+        `FleetPartUnavailable` rather than a fleet missing a part: the push would delete its robots' hosts.
         """
         ...
 
     def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
-        """A snapshot of the robots named that are followed, the others left out; raises as `snapshot`."""
+        """A snapshot of the robots named that are followed, others left out; raises as `robot_digests`."""
         ...
 
     def exposition_parts(self) -> list[ExpositionPart]:
@@ -94,7 +91,7 @@ class Fleet(Protocol):
         ...
 
     def heard(self, with_components: bool = False) -> list[RememberedRobot]:
-        """Every robot heard (in this run or before it) and when it was last heard; raises as `snapshot`.
+        """Every robot heard (in this run or before it) and when it was last heard; raises as `robot_digests`.
 
         `with_components` adds what each reported, for a clean stop.
         """

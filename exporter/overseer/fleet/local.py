@@ -110,10 +110,6 @@ class LocalFleet:
         if self._watch is not None:
             self._watch.stop()
 
-    def snapshot(self) -> FleetSnapshot:
-        """The model now."""
-        return self.model.snapshot()
-
     def robot_digests(self) -> dict[str, int | None]:
         """Every robot → its digest (None while awaiting), kept from the last call where nothing changed."""
         return self._signatures.digests(self.model.snapshot())

@@ -59,7 +59,6 @@ class PooledFleet:
         self.pool = WorkerPool(config, events, start, self.relay)
         self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
         self._counters = CounterCarry(self.pool.count)
-        self._last_snapshot: FleetSnapshot | None = None
         self._last_digests: tuple[float, dict[str, int | None]] | None = None
 
     def start(self) -> None:
@@ -82,25 +81,12 @@ class PooledFleet:
             self.relay.stop()
         self.pool.stop()
 
-    def snapshot(self) -> FleetSnapshot:
-        """One snapshot of the whole fleet, at most `SNAPSHOT_REUSE_SECONDS` old.
-
-        `WorkersUnavailable` when a worker cannot answer: a snapshot without its robots would tell the
-        Icinga 2 push that they are gone, and it would delete their hosts.
-        """
-        last = self._last_snapshot
-        if last is not None and time.monotonic() - last.taken_at < SNAPSHOT_REUSE_SECONDS:
-            return last
-        answers = self.pool.ask_every("snapshot")
-        self._last_snapshot = merge_snapshots(
-            [a.value for a in answers], self.pool.config.fleet, time.monotonic(), time.time()
-        )
-        return self._last_snapshot
-
     def robot_digests(self) -> dict[str, int | None]:
-        """Every worker's robots and digests, at most `SNAPSHOT_REUSE_SECONDS` old; raises as `snapshot`.
+        """Every worker's robots and digests, at most `SNAPSHOT_REUSE_SECONDS` old.
 
-        A few hundred kilobytes at 10,000 robots, where their snapshot is tens of megabytes to pickle.
+        `WorkersUnavailable` when a worker cannot answer: digests without its robots would tell the
+        Icinga 2 push that they are gone, and it would delete their hosts. A few hundred kilobytes at
+        10,000 robots, where their snapshot is tens of megabytes to pickle.
         """
         last = self._last_digests
         if last is not None and time.monotonic() - last[0] < SNAPSHOT_REUSE_SECONDS:
@@ -113,7 +99,7 @@ class PooledFleet:
         return digests
 
     def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
-        """The named robots from the workers that follow them, in one snapshot; raises as `snapshot`."""
+        """The named robots from the workers that follow them, in one snapshot; raises as `robot_digests`."""
         wanted = frozenset(names)
         answers = self.pool.ask_every("snapshot_of", wanted) if wanted else []
         parts = [answer.value for answer in answers]

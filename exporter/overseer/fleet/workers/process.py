@@ -59,9 +59,6 @@ def answer(fleet: LocalFleet, kind: str, argument: Any) -> Any:
     if kind == "components":
         assert isinstance(argument, ComponentQuery)
         return fleet.components_document(argument)
-    if kind == "snapshot":
-        snapshot = fleet.snapshot()
-        return replace(snapshot, robots=tuple(portable_robots(snapshot)))
     if kind == "digests":
         return fleet.robot_digests()
     if kind == "snapshot_of":
