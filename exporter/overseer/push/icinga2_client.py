@@ -122,23 +122,13 @@ class Icinga2Client:
                             break
                 finally:
                     reader.release()
-            except TimeoutError:
-                self.close()
-                return answers, Icinga2Error(
-                    "timeout", f"no answer from {self._config.url} within {self._config.timeout:g}s"
-                )
             except (http.client.HTTPException, OSError) as error:  # ssl.SSLError among them
-                self.close()
-                if attempt == 1 and not answers and kept_alive:
+                failure = self._failure(error)
+                if attempt == 1 and not answers and kept_alive and failure.reason != "timeout":
                     # Icinga closes a connection idle for 10 s: a batch finds it gone in more ways than one
                     # request does (a TLS error while the batch is being written, under load).
                     continue
-                if isinstance(error, ssl.SSLError):
-                    return answers, Icinga2Error(
-                        "tls", f"TLS with {self._config.url} failed: {tls_reason(error)}"
-                    )
-                text = getattr(error, "strerror", None) or str(error) or type(error).__name__
-                return answers, Icinga2Error("connection", f"cannot reach {self._config.url}: {text}")
+                return answers, failure
             if response.will_close:
                 self.close()
             if len(answers) < len(bodies):  # the server closed the connection after this answer
@@ -161,22 +151,11 @@ class Icinga2Client:
                 connection.request(method, path, body=data, headers=headers)
                 response = connection.getresponse()
                 payload = response.read()
-            except TimeoutError:
-                self.close()
-                raise Icinga2Error(
-                    "timeout", f"no answer from {self._config.url} within {self._config.timeout:g}s"
-                ) from None
-            except ssl.SSLError as error:
-                self.close()
-                raise Icinga2Error(
-                    "tls", f"TLS with {self._config.url} failed: {tls_reason(error)}"
-                ) from None
             except (http.client.HTTPException, OSError) as error:
-                self.close()
+                failure = self._failure(error)
                 if attempt == 1 and isinstance(error, (http.client.RemoteDisconnected, BrokenPipeError)):
                     continue
-                text = getattr(error, "strerror", None) or str(error) or type(error).__name__
-                raise Icinga2Error("connection", f"cannot reach {self._config.url}: {text}") from None
+                raise failure from None
             if response.getheader("Connection", "").lower() == "close":
                 self.close()
             return response.status, payload
@@ -190,6 +169,17 @@ class Icinga2Client:
         raise Icinga2Error(
             f"http_{status}", f"{method} {path}: HTTP {status}: {error_text(document)}", status
         )
+
+    def _failure(self, error: Exception) -> Icinga2Error:
+        """The connection closed, and `error` (a timeout, TLS, or the connection) in Icinga2Error's words."""
+        self.close()
+        url = self._config.url
+        if isinstance(error, TimeoutError):
+            return Icinga2Error("timeout", f"no answer from {url} within {self._config.timeout:g}s")
+        if isinstance(error, ssl.SSLError):
+            return Icinga2Error("tls", f"TLS with {url} failed: {tls_reason(error)}")
+        text = getattr(error, "strerror", None) or str(error) or type(error).__name__
+        return Icinga2Error("connection", f"cannot reach {url}: {text}")
 
     def _connect(self) -> _Connection:
         if self._connection is None:
