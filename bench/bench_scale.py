@@ -68,6 +68,7 @@ from bench.common import (
     emit,
     forest,
     highest_tree_resident,
+    series_total,
     tree_cpu_seconds,
     tree_proportional_bytes,
     tree_resident_bytes,
@@ -180,7 +181,7 @@ def counted(text: str, transport: str) -> Counts:
     """Messages received, lost and dropped over `transport`, events, renders ahead, robots beyond the cap."""
 
     def total(pattern: str) -> float:
-        return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
+        return series_total(text, pattern)
 
     def messages(result: str) -> float:
         return total(rf'overseer_messages_total\{{result="{result}",transport="{transport}"\}}')

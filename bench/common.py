@@ -6,6 +6,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import sys
 import threading
 import time
@@ -71,6 +72,11 @@ def _number(value: float) -> str:
     if value == int(value) and abs(value) < 1e15:
         return f"{int(value):,}"
     return f"{value:,.3g}" if abs(value) < 10 else f"{value:,.1f}"
+
+
+def series_total(text: str, pattern: str) -> float:
+    """The sum of the samples in exposition `text` whose name and labels match `pattern` whole."""
+    return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
 
 
 def repo_on_path() -> dict[str, str]:

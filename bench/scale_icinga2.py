@@ -6,7 +6,6 @@ so a fleet first heard is registered in stages; its results are pushed again eve
 
 from __future__ import annotations
 
-import re
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -14,7 +13,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from bench.bench_icinga2 import icinga2_cpu
-from bench.common import Row
+from bench.common import Row, series_total
 from testbed.icinga2 import (
     PUSH_BULK_USER,
     Icinga2,
@@ -59,9 +58,9 @@ class Icinga2Receiving:
         )
         received = status["passive_host_checks_1min"] + status["passive_service_checks_1min"]
         due = objects * 60 / self.interval
-        failed = _total(metrics, r'overseer_icinga2_pushes_total\{result="(?!ok")[a-z_0-9]+"\}')
-        stages = _total(metrics, r'overseer_icinga2_package_stages_total\{result="ok"\}')
-        pending = _total(metrics, "overseer_icinga2_pending_results")
+        failed = series_total(metrics, r'overseer_icinga2_pushes_total\{result="(?!ok")[a-z_0-9]+"\}')
+        stages = series_total(metrics, r'overseer_icinga2_package_stages_total\{result="ok"\}')
+        pending = series_total(metrics, "overseer_icinga2_pending_results")
         every = f"every {self.interval:g} s"
         return [
             Row("scale", f"Icinga 2 push {every}: hosts and services registered", objects, "objects"),
@@ -88,10 +87,6 @@ class Icinga2Receiving:
 
 HOST_STATES = ("up", "down", "unreachable", "pending")
 SERVICE_STATES = ("ok", "warning", "critical", "unknown", "pending")
-
-
-def _total(text: str, pattern: str) -> float:
-    return sum(float(value) for value in re.findall(rf"^{pattern} (\S+)$", text, re.MULTILINE))
 
 
 @contextmanager
