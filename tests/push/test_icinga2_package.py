@@ -1,5 +1,7 @@
 """A fleet first heard is registered in a real Icinga 2 in one stage of the exporter's config package.
 
+Its results then repeat spread over the interval, not all at once as they were first sent.
+
 Its own Icinga 2 daemon (a stage reloads it, which the other push tests' daemon should not see), with
 two users: the shipped push ApiUser example as it is, and the same with its optional config package
 permissions switched on. Each test runs exporters in the test process, their models filled before the
@@ -11,7 +13,9 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from collections.abc import Iterator
+import time
+from collections import Counter
+from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -19,8 +23,10 @@ from typing import Any
 import pytest
 
 from overseer.app import Exporter
+from overseer.fleet.local import LocalFleet
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetSnapshot
+from overseer.push import icinga2_push
 from overseer.push.icinga2_names import host_name
 from overseer.push.icinga2_package import dsl_string, object_text, package_name
 from overseer.push.icinga2_push import BULK_OBJECTS
@@ -77,12 +83,13 @@ def exporter(
     robots: list[str],
     robot_timeout: str = "1h",
     groups: tuple[str, ...] = ("Power", "Motor"),
+    interval: str = "1h",
 ) -> Iterator[Exporter]:
     """An in-process exporter pushing `robots` (in its model before the push starts) to `daemon` as `user`.
 
     Each robot's first array has a component in each of `groups`.
     """
-    config = push_config(tmp_path, daemon, exporter_id, "1h", timeout="5s", username=user)
+    config = push_config(tmp_path, daemon, exporter_id, interval, timeout="5s", username=user)
     section = json.loads(config.read_text())["icinga2"]
 
     def fill(running: Exporter) -> None:
@@ -172,6 +179,38 @@ def test_a_fleet_first_heard_is_registered_in_one_stage(
     assert {service["package"] for service in services(icinga, "pkg.robot0").values()} == {"overseer-bulk"}
     assert found["pkg.robot0"]["last_check_result"]["output"].startswith("UP - pkg/robot0")
     assert len(stages(icinga, "bulk")) == 1
+
+
+def test_a_fleet_first_sent_at_once_repeats_spread_over_the_interval(
+    icinga: Icinga2, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    interval = 4.0
+    robots = [f"spread/robot{index}" for index in range(ROBOTS)]
+    asked: list[int] = []  # how many robots each snapshot the push asked for held
+    snapshot_of = LocalFleet.robots_snapshot
+
+    def counted(fleet: LocalFleet, names: Collection[str]) -> FleetSnapshot:
+        asked.append(len(names))
+        return snapshot_of(fleet, names)
+
+    monkeypatch.setattr(LocalFleet, "robots_snapshot", counted)
+    monkeypatch.setattr(icinga2_push, "SNAPSHOT_ROBOTS", 7)  # the fleet first heard is asked 7 at a time
+    with exporter(tmp_path, icinga, "spread", PUSH_BULK_USER, robots, interval=f"{interval:g}s"):
+        wait_for(lambda: all_pushed(icinga, "spread.", ROBOTS, 3), timeout=90, message="every robot pushed")
+        time.sleep(2)  # the components go STALE after 1 s: that change goes to every robot at once too
+        sent: dict[str, set[float]] = {}  # host → when Icinga received each of its results
+        watched_until = time.monotonic() + 2 * interval
+        while time.monotonic() < watched_until:
+            for host, attrs in hosts(icinga, "spread.").items():
+                sent.setdefault(host, set()).add(attrs["last_check_result"]["execution_end"])
+            time.sleep(0.2)
+    first = min(min(times) for times in sent.values())
+    repeats = sorted(when for times in sent.values() for when in times if when > first + interval / 4)
+    assert len(sent) == ROBOTS and all(len(times) >= 2 for times in sent.values())  # every robot repeated
+    assert asked and max(asked) == 7
+    quarters = Counter(int((when - first) / (interval / 4)) % 4 for when in repeats)
+    # Sent together, every repeat falls in one quarter of the interval; spread, none holds most of them.
+    assert max(quarters.values()) <= 0.6 * len(repeats), (quarters, repeats)
 
 
 def test_robots_heard_before_their_groups_have_the_group_services_registered_in_one_stage(

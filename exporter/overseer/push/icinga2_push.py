@@ -2,7 +2,8 @@
 
 It reads the fleet's digests every tick (`fleet.robot_digests()`), then a snapshot of only the robots
 it has results to queue for. A robot whose level (or up/down, or set of components) changed has its
-results queued as urgent at once; every robot's results are queued again every `interval`. Pending
+results queued as urgent at once; every robot's results are queued again every `interval`, each robot at
+its own phase of it (`icinga2_schedule`), a few hundred robots asked of the fleet at a time. Pending
 results are kept as the latest one per host and service, never as a queue of every intermediate one,
 so after an outage Icinga gets the state now. Objects are created on first need and marked with
 `vars.overseer_exporter`; only objects with this exporter's mark are ever changed or deleted. Many
@@ -32,6 +33,7 @@ from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
 from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results
+from overseer.push.icinga2_schedule import next_due
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
@@ -42,6 +44,7 @@ ResultKey = tuple[str, str]  # a host, and one of its services or '' for the hos
 TICK_SECONDS = 0.25
 BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the fleet again
 PIPELINED_RESULTS = 50  # results sent in one write, their answers read after
+SNAPSHOT_ROBOTS = 500  # robots asked of the fleet at once, their results queued before the next are asked
 SILENT_TEXT = "UNKNOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 HOST_SILENT_TEXT = "DOWN - no result from the Overseer exporter within its TTL: the exporter is silent"
 # Active checks only run once a pushed result's TTL ran out; then `dummy` says the exporter is silent.
@@ -142,10 +145,11 @@ class Icinga2Push:
             signature = (digest, None if schedule is None else schedule.state(name, active))
             if signature != self._signatures.get(name) or now >= self._due.get(name, 0.0):
                 signatures[name] = signature
-        if signatures:
-            # Only these robots: at 10,000 robots over ingest workers the whole fleet is tens of megabytes
-            # to pickle every look. One that changed again since its digest shows it at the next look.
-            snapshot = self._fleet.robots_snapshot(signatures)
+        # Only these robots, a few hundred at a time: at 10,000 robots over ingest workers the whole fleet
+        # is tens of megabytes to pickle. One that changed again since its digest shows it at the next look.
+        names = list(signatures)
+        for start in range(0, len(names), SNAPSHOT_ROBOTS):
+            snapshot = self._fleet.robots_snapshot(names[start : start + SNAPSHOT_ROBOTS])
             for robot in snapshot.robots:
                 self._queue_robot(snapshot, robot, signatures[robot.name], now)
         for gone in [name for name in self._robot_hosts if name not in digests]:
@@ -195,7 +199,7 @@ class Icinga2Push:
             else:
                 self._urgent[result.key] = result
         self._signatures[robot.name] = signature
-        self._due[robot.name] = now + self._config.interval
+        self._due[robot.name] = next_due(robot.name, now, self._config.interval)
 
     def _deliver(self, now: float) -> None:
         deadline = now + BATCH_SECONDS
