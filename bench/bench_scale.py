@@ -615,6 +615,7 @@ def run(
             started, started_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
             router_cpu = wires.router_cpu()
             prometheus_rows: list[Row] = []
+            push_rows: list[Row] = []
             with wires.probe(shard_of(exporters, PROBE_ROBOT).url, shape.components) as probe:
                 # Steady: from the window's middle (the first look long over) to the check's runs.
                 time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
@@ -623,6 +624,8 @@ def run(
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
                 steady_rss = highest_tree_resident(pids, steady_until)
                 steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
+                if icinga2 and pushing_from:  # while the fleet publishes: at its end every robot changes
+                    push_rows = icinga2.rows(pushing_from, metrics_text(exporters[0].url))
                 checked = shard_of(exporters, CHECKED_ROBOT).url
                 checks = check_rows(checked, CHECKED_ROBOT)  # the last seconds of the window
                 if page:
@@ -654,7 +657,6 @@ def run(
         cpu = forest(tree_cpu_seconds, pids) - started_cpu
         router_cpu = wires.router_cpu() - router_cpu
         texts = [metrics_text(exporter.url) for exporter in exporters]
-        push_rows = icinga2.rows(pushing_from, texts[0]) if icinga2 and pushing_from else []
         counts = together([counted(text, transport) for text in texts])
         followed = [followed_robots(text) for text in texts]
         probed = probe.published if probe else 0
