@@ -124,7 +124,7 @@ class Icinga2Client:
                     reader.release()
             except (http.client.HTTPException, OSError) as error:  # ssl.SSLError among them
                 failure = self._failure(error)
-                if attempt == 1 and not answers and kept_alive and failure.reason != "timeout":
+                if attempt == 1 and not answers and kept_alive and not isinstance(error, TimeoutError):
                     # Icinga closes a connection idle for 10 s: a batch finds it gone in more ways than one
                     # request does (a TLS error while the batch is being written, under load).
                     continue

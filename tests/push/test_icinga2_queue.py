@@ -1,0 +1,81 @@
+"""The push's look at the fleet, in process: a part of the fleet failing half-way through a look.
+
+No Icinga 2 answers here (the push's URL is a closed loopback port): what is looked at is what the push
+queues, not what it delivers, which the tests beside this one follow into a real Icinga 2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from dataclasses import replace
+
+import pytest
+
+from overseer.config.icinga2 import Icinga2Config
+from overseer.fleet.interface import FleetPartUnavailable
+from overseer.fleet.level_digests import Signatures
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel, FleetSnapshot
+from overseer.push import icinga2_push
+from overseer.push.icinga2_push import Icinga2Push
+from support.clock import ManualClock
+from testbed.ports import free_port
+
+ROBOTS = [f"robot{index}" for index in range(10)]
+
+
+class FleetFailingOnce:
+    """The robots of `model`, whose `robots_snapshot` fails on its `fail_at`-th call (a worker restarting)."""
+
+    def __init__(self, model: FleetModel, fail_at: int) -> None:
+        """Serve `model`; fail the `fail_at`-th ask."""
+        self.model = model
+        self.fail_at = fail_at
+        self.asked: list[set[str]] = []
+        self._signatures = Signatures()
+
+    def robot_digests(self) -> dict[str, int | None]:
+        """Every robot's digest."""
+        return self._signatures.digests(self.model.snapshot())
+
+    def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
+        """The robots named, or FleetPartUnavailable on the `fail_at`-th call."""
+        self.asked.append(set(names))
+        if len(self.asked) == self.fail_at:
+            raise FleetPartUnavailable("ingest worker 1 is restarting")
+        snapshot = self.model.snapshot()
+        return replace(snapshot, robots=tuple(robot for robot in snapshot.robots if robot.name in names))
+
+
+def queued_hosts(push: Icinga2Push) -> list[str]:
+    """The hosts of the results the push holds, one entry a host result (each robot's once)."""
+    return [host for host, service in [*push._urgent, *push._pending] if not service]
+
+
+def test_a_part_failing_half_way_through_a_look_leaves_the_robots_not_reached_for_the_next(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(icinga2_push, "SNAPSHOT_ROBOTS", 4)  # 10 robots: asked 4, 4 and 2 at a time
+    clock = ManualClock(1000.0)
+    model = FleetModel(FleetLimits(stale_after=60, robot_timeout=120), clock=clock)
+    for robot in ROBOTS:
+        model.apply(
+            robot, DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/Power/Battery", "ok", "", ()),)), "dds"
+        )
+    fleet = FleetFailingOnce(model, fail_at=2)
+    port = free_port()  # nothing listens: every delivery fails and waits its backoff
+    config = Icinga2Config(
+        url=f"https://127.0.0.1:{port}", host="127.0.0.1", port=port, ca_file="", password="p"
+    )
+    push = Icinga2Push(config, fleet, expire_after=3600.0, clock=clock)  # type: ignore[arg-type]
+
+    push.step()  # the first 4 robots queued, then the second ask fails: the look stops there
+    first = queued_hosts(push)
+    assert len(first) == 4 and set(first) == fleet.asked[0]
+    assert not push._to_delete  # a partial look forgets no robot
+
+    clock.now += 1.0
+    push.step()  # the next look asks for the 6 robots the first did not reach, and only for them
+    assert set().union(*fleet.asked[2:]) == set(ROBOTS) - set(first)
+    assert sorted(queued_hosts(push)) == sorted(ROBOTS)  # every robot queued once
+    assert not push._to_delete
