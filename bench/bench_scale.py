@@ -624,10 +624,10 @@ def run(
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
                 steady_rss = highest_tree_resident(pids, steady_until)
                 steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
-                if icinga2 and pushing_from:  # while the fleet publishes: at its end every robot changes
-                    push_rows = icinga2.rows(pushing_from, metrics_text(exporters[0].url))
                 checked = shard_of(exporters, CHECKED_ROBOT).url
                 checks = check_rows(checked, CHECKED_ROBOT)  # the last seconds of the window
+                if icinga2 and pushing_from:  # while the fleet publishes: once it stops every robot changes
+                    push_rows = icinga2.rows(pushing_from, metrics_text(exporters[0].url))
                 if page:
                     time.sleep(max(0.0, started + seconds - time.monotonic()))
                     checks += page_rows(checked, CHECKED_ROBOT)

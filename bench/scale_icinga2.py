@@ -24,7 +24,7 @@ from testbed.icinga2 import (
 )
 
 EXPORTER_ID = "scale"
-RECEIVED_TARGET = 0.95  # of the results due a minute: pushed every interval, bunched at its start
+RECEIVED_TARGET = 0.95  # of the results due a minute: each object once an interval, a few on their way
 
 
 class PushMark(NamedTuple):
