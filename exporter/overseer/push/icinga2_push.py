@@ -414,6 +414,14 @@ class Icinga2Push:
         """Make `hosts` and their services the package's content; raises what `ConfigPackage.deploy` does."""
         if self._package is None:
             raise PackageRefused("config packages are not used")
+        self._package.deploy(self._stage_text(hosts), loaded)
+
+    def _stage_text(self, hosts: dict[str, set[str]]) -> str:
+        """The package's content for `hosts` and their services, as one text.
+
+        Its objects' texts are let go before the stage is deployed: at 10,000 robots, 70,000 small strings
+        (30 MB) that would otherwise stay in Python's arenas while Icinga validates and loads the stage.
+        """
         texts = []
         for host in sorted(hosts):
             variables = (
@@ -425,7 +433,7 @@ class Icinga2Push:
             for service in sorted(hosts[host]):
                 attrs = self._service_attrs()
                 texts.append(object_text("Service", service, attrs, self._config.service_template, host))
-        self._package.deploy("".join(texts), loaded)
+        return "".join(texts)
 
     def _package_name(self) -> str:
         return "(none)" if self._package is None else self._package.name
