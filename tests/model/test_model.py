@@ -474,10 +474,13 @@ def test_one_robots_snapshot_holds_that_robot_as_the_fleets_snapshot_judges_it()
 
     whole = model.snapshot()
     for name in ("r1", "r2"):
-        alone = model.robot_snapshot(name)
+        alone = model.robots_snapshot((name,))
         assert [robot.name for robot in alone.robots] == [name]
         robot = alone.robots[0]
         assert robot is whole.find(name)
         assert alone.robot_up(robot) == whole.robot_up(robot)
         assert alone.component_levels(robot, True) == whole.component_levels(robot, True)
-    assert model.robot_snapshot("r3").robots == ()
+    assert model.robots_snapshot(("r3",)).robots == ()
+    named = model.robots_snapshot(["r2", "r3", "r1"])  # the push's few robots: the known ones, in that order
+    assert [robot.name for robot in named.robots] == ["r2", "r1"]
+    assert all(robot is whole.find(robot.name) for robot in named.robots)

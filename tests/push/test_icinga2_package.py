@@ -15,7 +15,7 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -224,15 +224,21 @@ def test_robots_heard_before_their_groups_have_the_group_services_registered_in_
         assert running.model is not None
         wait_for(lambda: all_pushed(icinga, "early.", len(robots), 1), timeout=90, message="the hosts pushed")
         assert stages_counted(running, "ok") == 1
-        # Every robot's groups at once, as the push looks: no look between two robots' arrays.
+        # Every robot's groups at once, as the push looks (its digests, then its robots): no look between
+        # two robots' arrays.
         gate = threading.RLock()
-        snapshot = running.model.snapshot
+        snapshot, robots_snapshot = running.model.snapshot, running.model.robots_snapshot
 
         def gated() -> FleetSnapshot:
             with gate:
                 return snapshot()
 
+        def gated_robots(names: Iterable[str]) -> FleetSnapshot:
+            with gate:
+                return robots_snapshot(names)
+
         monkeypatch.setattr(running.model, "snapshot", gated)
+        monkeypatch.setattr(running.model, "robots_snapshot", gated_robots)
         with gate:
             for robot in robots:
                 running.model.apply(robot, robot_array(0), "dds")

@@ -9,7 +9,6 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Collection
-from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -116,9 +115,7 @@ class LocalFleet:
 
     def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
         """The model now, with only the robots named."""
-        snapshot = self.model.snapshot()
-        wanted = set(names)
-        return replace(snapshot, robots=tuple(robot for robot in snapshot.robots if robot.name in wanted))
+        return self.model.robots_snapshot(names)
 
     def exposition_parts(self) -> list[ExpositionPart]:
         """The model's rendered series and counters."""
@@ -138,7 +135,7 @@ class LocalFleet:
 
     def robot_document(self, name: str) -> dict[str, Any] | None:
         """One robot with every component, or None."""
-        snapshot = self.model.robot_snapshot(name)
+        snapshot = self.model.robots_snapshot((name,))
         robot = snapshot.find(name)
         return None if robot is None else robot_document(snapshot, robot)
 

@@ -527,15 +527,15 @@ class FleetModel:
         if len(forgotten) > _FORGETTINGS_KEPT:
             del forgotten[next(iter(forgotten))]  # the oldest: the detector read it long ago
 
-    def robot_snapshot(self, name: str) -> FleetSnapshot:
-        """A snapshot holding only the robot called `name` (none when unknown), without the fleet's counts.
+    def robots_snapshot(self, names: Iterable[str]) -> FleetSnapshot:
+        """A snapshot holding only the robots named that are known, in that order, without the fleet's counts.
 
-        What one robot's document needs: a whole snapshot copies every robot and every count (10,000 of
-        each in a large fleet) for a page that shows one.
+        What one robot's document, or the push's few robots a look, need: a whole snapshot copies every
+        robot and every count (10,000 of each in a large fleet) for a page that shows one.
         """
         with self._lock:
-            robot = self._robots.get(name)
-        robots = () if robot is None else (robot,)
+            known = self._robots
+            robots = tuple(robot for name in names if (robot := known.get(name)) is not None)
         return FleetSnapshot(self._clock(), self.limits, robots, generated_at=self._wall_clock())
 
     def snapshot(self) -> FleetSnapshot:
