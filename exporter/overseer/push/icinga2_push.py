@@ -32,14 +32,12 @@ from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name, robot_name
 from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
-from overseer.push.icinga2_results import CheckResult, robot_groups, robot_results
+from overseer.push.icinga2_results import CheckResult, ResultKey, robot_groups, robot_results
 from overseer.push.icinga2_schedule import next_due
 from overseer.push.retry import Retry
 from overseer.verdict import Maintenance
 
 log = logging.getLogger(__name__)
-
-ResultKey = tuple[str, str]  # a host, and one of its services or '' for the host itself
 
 TICK_SECONDS = 0.25
 BATCH_SECONDS = 0.5  # deliver for at most this long before looking at the fleet again
@@ -83,8 +81,8 @@ class Icinga2Push:
         self._maintenance = maintenance
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
-        self._urgent: dict[tuple[str, str], CheckResult] = {}
-        self._pending: dict[tuple[str, str], CheckResult] = {}
+        self._urgent: dict[ResultKey, CheckResult] = {}
+        self._pending: dict[ResultKey, CheckResult] = {}
         self._signatures: dict[str, tuple[int, RobotMaintenance | None]] = {}  # robot → digest, maintenance
         self._due: dict[str, float] = {}
         self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
@@ -400,7 +398,7 @@ class Icinga2Push:
         host, services = next(iter(wanted.items()))
         return object_path("services", host, min(services))
 
-    def _made(self, key: tuple[str, str]) -> bool:
+    def _made(self, key: ResultKey) -> bool:
         """Whether the object of a result with this key exists, as far as this exporter knows."""
         if self._created is None:
             return False

@@ -30,6 +30,7 @@ from overseer.verdict import (
 )
 
 HOST_UP, HOST_DOWN = 0, 1
+ResultKey = tuple[str, str]  # a host, and one of its services or '' for the host itself
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +44,7 @@ class CheckResult:
     performance_data: tuple[str, ...]
 
     @property
-    def key(self) -> tuple[str, str]:
+    def key(self) -> ResultKey:
         """What this result replaces: the previous pending result of the same object."""
         return self.host, self.service
 
