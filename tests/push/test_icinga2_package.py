@@ -29,7 +29,7 @@ from overseer.model import FleetSnapshot
 from overseer.push import icinga2_push
 from overseer.push.icinga2_names import host_name
 from overseer.push.icinga2_package import dsl_string, object_text, package_name
-from overseer.push.icinga2_push import BULK_OBJECTS
+from overseer.push.icinga2_push import BULK_OBJECTS, Icinga2Push
 from testbed.icinga2 import (
     PUSH_BULK_USER,
     PUSH_USER,
@@ -179,6 +179,28 @@ def test_a_fleet_first_heard_is_registered_in_one_stage(
     assert {service["package"] for service in services(icinga, "pkg.robot0").values()} == {"overseer-bulk"}
     assert found["pkg.robot0"]["last_check_result"]["output"].startswith("UP - pkg/robot0")
     assert len(stages(icinga, "bulk")) == 1
+
+
+def test_a_fleet_beyond_the_queue_is_registered_in_one_stage_its_results_built_a_few_robots_at_a_time(
+    icinga: Icinga2, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    held: list[int] = []  # the results queued after each look
+    look = Icinga2Push._queue
+
+    def watched(push: Icinga2Push, now: float) -> None:
+        look(push, now)
+        held.append(len(push._urgent) + len(push._pending))
+
+    # Two robots' results (a host, robot and two group services each): the other 28 are owed theirs.
+    monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 8)
+    monkeypatch.setattr(Icinga2Push, "_queue", watched)
+    robots = [f"owed/robot{index}" for index in range(ROBOTS)]
+    with exporter(tmp_path, icinga, "owed", PUSH_BULK_USER, robots) as running:
+        wait_for(lambda: all_pushed(icinga, "owed.", ROBOTS, 3), timeout=90, message="every robot pushed")
+        assert (stages_counted(running, "ok"), stages_counted(running, "rejected")) == (1, 0)
+    assert {host["package"] for host in hosts(icinga, "owed.").values()} == {"overseer-owed"}
+    # At most one robot's results beyond the cap, where the whole fleet's 120 were held at once.
+    assert held and max(held) <= 8 + 3, held
 
 
 def test_a_fleet_first_sent_at_once_repeats_spread_over_the_interval(

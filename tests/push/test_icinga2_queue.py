@@ -20,6 +20,7 @@ from overseer.model import FleetLimits, FleetModel, FleetSnapshot
 from overseer.push import icinga2_push
 from overseer.push.icinga2_package import object_text
 from overseer.push.icinga2_push import Icinga2Push
+from overseer.push.icinga2_results import CheckResult, ResultKey
 from support.clock import ManualClock
 from testbed.ports import free_port
 
@@ -120,3 +121,78 @@ def test_a_stages_object_texts_are_let_go_before_icinga_validates_it(monkeypatch
     # Counted the same way once the push let go of everything: a list of them all (30 MB at 10,000 robots)
     # held through the deploy would be one reference more.
     assert len(held) == 9 and held == references()
+
+
+def robots_model(clock: ManualClock) -> FleetModel:
+    """ROBOTS, each with one component in group Power, OK."""
+    model = FleetModel(FleetLimits(stale_after=600, robot_timeout=1200), clock=clock)
+    for robot in ROBOTS:
+        model.apply(robot, power_array(0), "dds")
+    return model
+
+
+def power_array(level: int, message: str = "state") -> DiagnosticArray:
+    """An array with one component, /Power/Battery, at `level`."""
+    return DiagnosticArray(0, 0, "", (DiagnosticStatus(level, "/Power/Battery", message, "", ()),))
+
+
+def delivered(push: Icinga2Push) -> dict[ResultKey, CheckResult]:
+    """Empty the push's queue as a delivery would, and what it held (urgent first)."""
+    held = {**push._urgent, **push._pending}
+    push._urgent.clear()
+    push._pending.clear()
+    return held
+
+
+def test_robots_beyond_the_queue_are_owed_their_results_and_registered_with_the_rest(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 6)  # two robots: a host, robot, Power result each
+    clock = ManualClock(1000.0)
+    model = robots_model(clock)
+    push = Icinga2Push(unreachable_config(), FleetFailingOnce(model, 0), 3600.0, clock=clock)  # type: ignore[arg-type]
+
+    push.step()
+    assert queued_hosts(push) == ["robot0", "robot1"]
+    assert list(push._owed) == ROBOTS[2:]
+    assert push.stats.read()[2] == 30  # every robot's results wait, built or not
+    push._created = {}  # as found in an empty Icinga: every robot's objects are wanted in the first stage
+    wanted = push._unmade_wanted()
+    assert wanted == {robot: {"ros-diagnostics", "ros-diagnostics-Power"} for robot in ROBOTS}
+
+    # An owed robot's message changes (its level does not, so no look asks for it): its results, built
+    # once there is room, come from the fleet then, not from the look that owed them.
+    model.apply("robot9", power_array(0, "charging"), "dds")
+    sent: dict[ResultKey, CheckResult] = {}
+    hosts: list[str] = []
+    while push._urgent or push._pending:
+        held = delivered(push)
+        hosts.extend(host for host, service in held if not service)
+        sent.update(held)
+        push.step()  # at the same moment: no robot's repeat is due yet
+    assert hosts == ROBOTS and not push._owed  # each robot's results built once, in the order heard
+    assert "charging" in sent[("robot9", "ros-diagnostics")].plugin_output
+    assert "charging" not in sent[("robot1", "ros-diagnostics")].plugin_output
+
+
+def test_an_owed_robot_whose_level_changed_goes_before_owed_repeats(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 6)
+    clock = ManualClock(1000.0)
+    model = robots_model(clock)
+    push = Icinga2Push(unreachable_config(), FleetFailingOnce(model, 0), 3600.0, clock=clock)  # type: ignore[arg-type]
+    push.step()
+    while push._urgent or push._pending:
+        delivered(push)
+        push.step()
+    clock.now += 2 * push._config.interval  # every robot's repeat due at once: two built, eight owed
+    push.step()
+    assert len(push._pending) == 6 and not push._urgent and not any(push._owed.values())
+    delivered(push)
+    model.apply("robot8", power_array(2), "dds")
+    push.step()  # two owed repeats fill the queue; robot8's change is owed as urgent
+    assert push._owed["robot8"] and not push._urgent
+    delivered(push)
+    push.step()
+    urgent = push._urgent
+    assert [host for host, service in urgent if not service] == ["robot8"]
+    assert urgent[("robot8", "ros-diagnostics")].exit_status == 2

@@ -76,13 +76,20 @@ def robot_results(
     if maintenance is not None:
         host_text += maintenance_text(maintenance)
     results = [CheckResult(host, "", HOST_UP if up else HOST_DOWN, host_text, ())]
-    if "robot" in kinds:
-        results.append(service_result(host, ROBOT_SERVICE, judge(judged, Settings())))
-    if "groups" in kinds:
-        for group in groups:
-            settings = Settings(name_regex=re.compile(group_pattern(group)))
-            results.append(service_result(host, group_service_name(group), judge(judged, settings)))
+    for service, group in robot_services(kinds, groups):
+        settings = Settings() if group is None else Settings(name_regex=re.compile(group_pattern(group)))
+        results.append(service_result(host, service, judge(judged, settings)))
     return results
+
+
+def robot_services(kinds: tuple[str, ...], groups: list[str]) -> list[tuple[str, str | None]]:
+    """A robot's services for `kinds` and `groups`: each one's name and its group (None: the whole robot)."""
+    services: list[tuple[str, str | None]] = []
+    if "robot" in kinds:
+        services.append((ROBOT_SERVICE, None))
+    if "groups" in kinds:
+        services.extend((group_service_name(group), group) for group in groups)
+    return services
 
 
 def judged_robot(
