@@ -35,11 +35,13 @@ class FleetFailingOnce:
         self.model = model
         self.fail_at = fail_at
         self.asked: list[set[str]] = []
+        self.forgotten: set[str] = set()  # robots the fleet no longer has
         self._signatures = Signatures()
 
     def robot_digests(self) -> dict[str, int | None]:
-        """Every robot's digest."""
-        return self._signatures.digests(self.model.snapshot())
+        """Every robot's digest but the forgotten's."""
+        digests = self._signatures.digests(self.model.snapshot())
+        return {name: digest for name, digest in digests.items() if name not in self.forgotten}
 
     def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
         """The robots named, or FleetPartUnavailable on the `fail_at`-th call."""
@@ -175,7 +177,7 @@ def test_robots_beyond_the_queue_are_owed_their_results_and_registered_with_the_
     assert "charging" not in sent[("robot1", "ros-diagnostics")].plugin_output
 
 
-def test_an_owed_robot_whose_level_changed_goes_before_owed_repeats(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_robot_whose_level_changed_goes_before_owed_repeats(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 6)
     clock = ManualClock(1000.0)
     model = robots_model(clock)
@@ -189,10 +191,51 @@ def test_an_owed_robot_whose_level_changed_goes_before_owed_repeats(monkeypatch:
     assert len(push._pending) == 6 and not push._urgent and not any(push._owed.values())
     delivered(push)
     model.apply("robot8", power_array(2), "dds")
-    push.step()  # two owed repeats fill the queue; robot8's change is owed as urgent
-    assert push._owed["robot8"] and not push._urgent
-    delivered(push)
+    push.step()  # robot8's change first, then the first owed repeat: the queue is full again
+    assert [host for host, service in push._urgent if not service] == ["robot8"]
+    assert push._urgent[("robot8", "ros-diagnostics")].exit_status == 2
+    assert [host for host, service in push._pending if not service] == ["robot2"]
+    assert "robot8" not in push._owed and list(push._owed) == [
+        "robot3",
+        "robot4",
+        "robot5",
+        "robot6",
+        "robot7",
+        "robot9",
+    ]
+
+
+def test_a_robot_changing_at_every_look_is_sent_while_a_backlog_lasts(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 6)
+    clock = ManualClock(1000.0)
+    model = robots_model(clock)
+    push = Icinga2Push(unreachable_config(), FleetFailingOnce(model, 0), 3600.0, clock=clock)  # type: ignore[arg-type]
+    queued_with_robot9 = 0
+    for tick in range(30):
+        clock.now += push._config.interval  # every robot's repeat due at every look: the backlog lasts
+        model.apply("robot9", power_array(2 * (tick % 2)), "dds")  # and robot9's level changes each time
+        push.step()
+        queued_with_robot9 += ("robot9", "") in push._urgent
+        for key in [*push._urgent, *push._pending][:4]:  # four results delivered a tick, urgent first
+            push._urgent.pop(key, None) or push._pending.pop(key)
+    # Owed repeats filling the room before each look would leave robot9 owed at every look, never sent.
+    assert queued_with_robot9 >= 25
+
+
+def test_a_robot_forgotten_while_owed_leaves_nothing_behind(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(icinga2_push, "QUEUED_RESULTS", 6)
+    clock = ManualClock(1000.0)
+    fleet = FleetFailingOnce(robots_model(clock), 0)
+    push = Icinga2Push(unreachable_config(), fleet, 3600.0, clock=clock)  # type: ignore[arg-type]
     push.step()
-    urgent = push._urgent
-    assert [host for host, service in urgent if not service] == ["robot8"]
-    assert urgent[("robot8", "ros-diagnostics")].exit_status == 2
+    assert "robot5" in push._owed
+    fleet.forgotten.add("robot5")
+    push.step()
+    state = (push._owed, push._signatures, push._due, push._groups, push._robot_hosts)
+    assert all("robot5" not in held for held in state) and push._to_delete == {"robot5"}
+    assert push.stats.read()[2] == 27  # nine robots' three results, built or owed
+    delivered(push)
+    push._created = {}
+    assert "robot5" not in push._unmade_wanted()

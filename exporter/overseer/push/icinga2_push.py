@@ -20,7 +20,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Container, Iterator
 from typing import Any
 
 from overseer.config.icinga2 import Icinga2Config
@@ -108,7 +108,9 @@ class Icinga2Push:
         self._package_paused_until = 0.0
         self._packaged: dict[str, set[str]] = {}  # hosts of the package → their services in it
         self._owed: dict[str, bool] = {}  # robot → urgent, for robots whose results wait for room to be built
-        self._unmade_queued = True  # a result was queued since the last look whose object may not exist
+        self._unmade_queued = (
+            True  # a result was queued or owed since the last look whose object may not exist
+        )
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -142,7 +144,7 @@ class Icinga2Push:
             log.info("Icinga 2 push: not queueing this tick, %s", error)
         if self._retry.due(now):
             self._deliver(now)
-        self.stats.set_pending(self._queued() + sum(len(self._keys(robot)) for robot in self._owed))
+        self.stats.set_pending(self._queued() + sum(self._key_count(robot) for robot in self._owed))
 
     def _queue(self, now: float) -> None:
         digests = self._fleet.robot_digests()
@@ -155,21 +157,8 @@ class Icinga2Push:
             signature = (digest, None if schedule is None else schedule.state(name, active))
             if signature != self._signatures.get(name) or now >= self._due.get(name, 0.0):
                 signatures[name] = signature
-        self._queue_owed(digests, signatures, now)
-        # Only these robots, a few hundred at a time: at 10,000 robots over ingest workers the whole fleet
-        # is tens of megabytes to pickle. One that changed again since its digest shows it at the next look.
-        names = list(signatures)
-        for start in range(0, len(names), SNAPSHOT_ROBOTS):
-            snapshot = self._fleet.robots_snapshot(names[start : start + SNAPSHOT_ROBOTS])
-            for robot in snapshot.robots:
-                signature = signatures[robot.name]
-                urgent = signature != self._signatures.get(robot.name) or self._owed.get(robot.name, False)
-                self._know(robot)
-                self._signatures[robot.name] = signature
-                if self._queued() < QUEUED_RESULTS:
-                    self._queue_results(snapshot, robot, urgent, now)
-                else:
-                    self._owe(robot.name, urgent)
+        waiting = [name for name in self._owed if name not in signatures and digests.get(name) is not None]
+        self._queue_in_turn(signatures, waiting, now)
         for gone in [name for name in self._robot_hosts if name not in digests]:
             host = self._robot_hosts.pop(gone)
             self._signatures.pop(gone, None)
@@ -183,34 +172,52 @@ class Icinga2Push:
             self._to_delete.add(host)
             log.info("robot %s was forgotten: deleting its Icinga 2 objects", gone)
 
-    def _queue_owed(
-        self,
-        digests: dict[str, int | None],
-        looked_at: dict[str, tuple[int, RobotMaintenance | None]],
-        now: float,
+    def _queue_in_turn(
+        self, looked_at: dict[str, tuple[int, RobotMaintenance | None]], waiting: list[str], now: float
     ) -> None:
-        """Build the results of robots owed them, as many as the queue has room for.
+        """Build the results of the robots `looked_at` (their new signatures) and `waiting`, as room allows.
 
-        They waited longest: they go before the robots of this look, those whose level changed first.
-        Robots this look asks for anyway (`looked_at`) are left to it.
+        In turn: changes owed, changes new, repeats owed, repeats new; a robot left out is owed its
+        results. Every robot looked at is asked of the fleet, a few hundred at a time (at 10,000 robots
+        over ingest workers the whole fleet is tens of megabytes to pickle), so that its objects are
+        registered with the rest; one waiting only while there is room.
         """
-        owed = sorted(
-            (name for name in self._owed if name not in looked_at and digests.get(name) is not None),
-            key=lambda name: not self._owed[name],
-        )
-        taken = 0
-        while taken < len(owed) and self._queued() < QUEUED_RESULTS:
-            room, names = QUEUED_RESULTS - self._queued(), owed[taken : taken + SNAPSHOT_ROBOTS]
-            for count, name in enumerate(names, 1):
-                room -= len(self._keys(name))
-                if room <= 0:
-                    del names[count:]
-                    break
-            taken += len(names)
+
+        def turn(name: str) -> tuple[bool, bool]:
+            owed = name in self._owed
+            changed = name in looked_at and looked_at[name] != self._signatures.get(name)
+            urgent = self._owed.get(name, False) or changed
+            return not urgent, not owed
+
+        for names in self._asks(sorted([*looked_at, *waiting], key=turn), looked_at):
             snapshot = self._fleet.robots_snapshot(names)
-            for robot in snapshot.robots:
+            robots = {robot.name: robot for robot in snapshot.robots}  # in the fleet's order, not the turn's
+            for robot in (robots[name] for name in names if name in robots):
+                urgent = self._owed.get(robot.name, False)
+                if robot.name in looked_at:
+                    signature = looked_at[robot.name]
+                    urgent = urgent or signature != self._signatures.get(robot.name)
+                    self._signatures[robot.name] = signature
                 self._know(robot)
-                self._queue_results(snapshot, robot, self._owed[robot.name], now)
+                if self._queued() < QUEUED_RESULTS:
+                    self._queue_results(snapshot, robot, urgent, now)
+                else:
+                    self._owe(robot.name, urgent)
+
+    def _asks(self, names: list[str], looked_at: Container[str]) -> Iterator[list[str]]:
+        """`names` in asks of the fleet, leaving out robots not `looked_at` once the queue has no room."""
+        room = QUEUED_RESULTS - self._queued()  # an estimate: robots heard for the first time have no groups
+        ask: list[str] = []
+        for name in names:
+            if name not in looked_at and room <= 0:
+                continue
+            room -= self._key_count(name)
+            ask.append(name)
+            if len(ask) == SNAPSHOT_ROBOTS:
+                yield ask
+                room, ask = QUEUED_RESULTS - self._queued(), []
+        if ask:
+            yield ask
 
     def _know(self, robot: RobotState) -> None:
         """Note what `robot`'s objects are: its host, its labels, every group it had."""
@@ -247,10 +254,18 @@ class Icinga2Push:
         self._due[robot.name] = next_due(robot.name, now, self._config.interval)
 
     def _owe(self, robot: str, urgent: bool) -> None:
-        """Leave `robot`'s results to be built once the queue has room; its objects are registered before."""
+        """Leave `robot`'s results to be built once the queue has room; its objects are registered before.
+
+        Its results still queued are dropped: those built later replace them, and a robot's results are
+        either queued or owed, never counted twice.
+        """
         self._owed[robot] = urgent
         self._due[robot] = math.inf  # no repeat while owed: its next moment counts from when it is built
-        if not self._unmade_queued and not all(self._made(key) for key in self._keys(robot)):
+        keys = self._keys(robot)
+        for key in keys:
+            self._urgent.pop(key, None)
+            self._pending.pop(key, None)
+        if not self._unmade_queued and not all(self._made(key) for key in keys):
             self._unmade_queued = True
 
     def _keys(self, robot: str) -> list[ResultKey]:
@@ -259,7 +274,13 @@ class Icinga2Push:
         services = robot_services(self._config.services, sorted(self._groups[robot]))
         return [(host, ""), *((host, service) for service, _ in services)]
 
+    def _key_count(self, robot: str) -> int:
+        """How many results `robot` has, as far as its groups are known: `len(self._keys(robot))`, cheaply."""
+        services = self._config.services
+        return 1 + ("robot" in services) + ("groups" in services) * len(self._groups.get(robot, ()))
+
     def _queued(self) -> int:
+        """How many results are built and queued."""
         return len(self._urgent) + len(self._pending)
 
     def _deliver(self, now: float) -> None:
@@ -373,7 +394,7 @@ class Icinga2Push:
             self._to_delete.discard(host)
 
     def _register_in_bulk(self, now: float) -> None:
-        """Register the objects the queued results need in one stage, when they are many.
+        """Register the objects the queued and owed results need in one stage, when they are many.
 
         New hosts with their services, and new services of the package's hosts: robots declared before
         they publish (an inventory, tokens heard first) get their hosts before their groups are known.
