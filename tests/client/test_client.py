@@ -2,12 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import time
 from pathlib import Path
 
 import pytest
 
 from overseer.client.exporter import AUTH_VARIABLE, ExporterClient, credentials, exporter_url, timeout_seconds
-from overseer.client.http import ClientError, parse_answer, parse_url, quote_path, request_bytes
+from overseer.client.http import (
+    ClientError,
+    Tls,
+    connect,
+    parse_answer,
+    parse_url,
+    quote_path,
+    request_bytes,
+)
+from testbed.ports import free_port
 
 
 @pytest.mark.parametrize(
@@ -123,3 +135,16 @@ def test_an_unreachable_exporter_is_one_client_error_naming_its_url() -> None:
         client.url_of("/api/v1/robots", "site_a/robot 7")
         == "http://127.0.0.1:9/api/v1/robots/site_a/robot%207"
     )
+
+
+def test_a_refused_connection_leaves_no_reference_cycle() -> None:
+    target = parse_url(f"http://127.0.0.1:{free_port()}/metrics")
+    gc.collect()
+    gc.disable()
+    try:
+        with contextlib.suppress(OSError):
+            connect(target, time.monotonic() + 5, Tls())
+        garbage = gc.collect()  # the error named by a local of the frame its traceback holds: a cycle
+    finally:
+        gc.enable()
+    assert garbage == 0

@@ -164,7 +164,10 @@ def connect(target: Url, deadline: float, tls: Tls) -> _socket.socket:
             error = refused
             continue
         return wrap_tls(sock, target.host, deadline, tls) if target.tls else sock
-    raise error
+    try:
+        raise error
+    finally:
+        del error  # a raised exception its own frame names is a reference cycle, freed only by a collection
 
 
 def wrap_tls(sock: _socket.socket, host: str, deadline: float, tls: Tls) -> _socket.socket:

@@ -152,10 +152,12 @@ class Icinga2Client:
                 response = connection.getresponse()
                 payload = response.read()
             except (http.client.HTTPException, OSError) as error:
-                failure = self._failure(error)
                 if attempt == 1 and isinstance(error, (http.client.RemoteDisconnected, BrokenPipeError)):
+                    self.close()
                     continue
-                raise failure from None
+                # Raised unnamed: a local naming it would hold this frame's traceback, which holds the
+                # local, a cycle that keeps every caller's frame (a stage's text) until a full collection.
+                raise self._failure(error) from None
             if response.getheader("Connection", "").lower() == "close":
                 self.close()
             return response.status, payload

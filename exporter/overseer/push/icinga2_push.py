@@ -559,7 +559,10 @@ class Icinga2Push:
             if delivered:
                 self.stats.delivered(delivered, time.time())
         if error is not None:
-            raise error
+            try:
+                raise error
+            finally:
+                del error  # or the frame its traceback holds would hold it: a cycle (see Icinga2Client)
         return looked
 
     def _body(self, result: CheckResult) -> dict[str, Any] | None:
