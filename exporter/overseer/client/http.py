@@ -161,7 +161,7 @@ def connect(target: Url, deadline: float, tls: Tls) -> _socket.socket:
             sock.connect(address)
         except OSError as refused:
             sock.close()
-            error = refused
+            error = refused.with_traceback(None)  # its traceback holds this frame, which would hold it
             continue
         return wrap_tls(sock, target.host, deadline, tls) if target.tls else sock
     try:

@@ -90,7 +90,9 @@ class AlertmanagerClient:
             label = "tls" if isinstance(reason, ssl.SSLError) else "connection"
             if isinstance(reason, TimeoutError):
                 label = "timeout"
-            raise AlertmanagerError(label, f"cannot reach {self._config.url}: {reason}") from None
+            text = f"cannot reach {self._config.url}: {reason}"
+            del reason  # the error or its cause, whose traceback holds this frame: a cycle (Icinga2Client)
+            raise AlertmanagerError(label, text) from None
         try:
             return json.loads(payload) if payload else None
         except (ValueError, RecursionError):

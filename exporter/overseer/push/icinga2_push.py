@@ -182,12 +182,12 @@ class Icinga2Push:
         over ingest workers the whole fleet is tens of megabytes to pickle), so that its objects are
         registered with the rest; one waiting only while there is room.
         """
+        since = {name: order for order, name in enumerate(self._owed)}  # the first owed goes first
 
-        def turn(name: str) -> tuple[bool, bool]:
-            owed = name in self._owed
+        def turn(name: str) -> tuple[bool, bool, int]:
             changed = name in looked_at and looked_at[name] != self._signatures.get(name)
             urgent = self._owed.get(name, False) or changed
-            return not urgent, not owed
+            return not urgent, name not in since, since.get(name, 0)
 
         for names in self._asks(sorted([*looked_at, *waiting], key=turn), looked_at):
             snapshot = self._fleet.robots_snapshot(names)
@@ -259,9 +259,11 @@ class Icinga2Push:
         Its results still queued are dropped: those built later replace them, and a robot's results are
         either queued or owed, never counted twice.
         """
+        keys = self._keys(robot)
+        # A change still undelivered keeps the robot urgent: owed as a repeat, it would wait behind them all.
+        urgent = urgent or self._owed.get(robot, False) or any(key in self._urgent for key in keys)
         self._owed[robot] = urgent
         self._due[robot] = math.inf  # no repeat while owed: its next moment counts from when it is built
-        keys = self._keys(robot)
         for key in keys:
             self._urgent.pop(key, None)
             self._pending.pop(key, None)

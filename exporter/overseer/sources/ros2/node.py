@@ -55,7 +55,10 @@ class RosNode:
             return function()
         done: Future[T] = Future()
         self._calls.put((function, done))
-        return done.result(timeout)
+        try:
+            return done.result(timeout)
+        finally:
+            del done  # what it raises holds this frame in its traceback: a cycle while this frame holds it
 
     def every(self, period: float, task: Callable[[], None]) -> int:
         """Run `task` in the node's thread every `period` seconds from now on; an id for `cancel`."""
