@@ -146,6 +146,17 @@ def stages_counted(running: Exporter, result: str) -> float:
     return float(lines[0].removeprefix(prefix)) if lines else 0.0
 
 
+def distinct_sets(running: Exporter) -> tuple[int, int]:
+    """How many distinct objects hold the push's services made, and packaged, for its hosts."""
+    push = running.icinga2_push
+    assert push is not None
+    if push._created is None:  # not yet found in Icinga
+        return -1, -1
+    return len({id(made) for made in push._created.values()}), len(
+        {id(made) for made in push._packaged.values()}
+    )
+
+
 def stages(daemon: Icinga2, exporter_id: str) -> list[str]:
     """The stages Icinga keeps of the exporter's package."""
     for package in daemon.api("GET", "/v1/config/packages", {})["results"]:
@@ -198,6 +209,7 @@ def test_a_fleet_beyond_the_queue_is_registered_in_one_stage_its_results_built_a
     with exporter(tmp_path, icinga, "owed", PUSH_BULK_USER, robots) as running:
         wait_for(lambda: all_pushed(icinga, "owed.", ROBOTS, 3), timeout=90, message="every robot pushed")
         assert (stages_counted(running, "ok"), stages_counted(running, "rejected")) == (1, 0)
+        assert distinct_sets(running) == (1, 1)  # the same services for every robot: one set, not 30
     assert {host["package"] for host in hosts(icinga, "owed.").values()} == {"overseer-owed"}
     # At most one robot's results beyond the cap, where the whole fleet's 120 were held at once.
     assert held and max(held) <= 8 + 3, held
@@ -283,6 +295,8 @@ def test_a_restarted_exporter_keeps_its_stage_and_deletes_a_forgotten_robot_with
     with exporter(tmp_path, icinga, "again", PUSH_BULK_USER, robots, robot_timeout="2s") as running:
         assert running.model is not None
         wait_for(lambda: "found 30 hosts of this exporter (again)" in caplog.text, timeout=30)
+        # As Icinga's answer listed them, a set each: shared once found.
+        wait_for(lambda: distinct_sets(running) == (1, 1), timeout=10, message="one set of services")
         # A group robot1 did not have: its service is made by a call of its own, outside the package.
         running.model.apply("again/robot1", robot_array(0, ("Power", "Motor", "Camera")), "dds")
         wait_for(
@@ -311,6 +325,7 @@ def test_without_the_package_permissions_robots_are_registered_one_object_a_call
         wait_for(lambda: all_pushed(icinga, "narrow.", ROBOTS, 3), timeout=120, message="every robot pushed")
         assert "the ApiUser may not deploy config packages" in caplog.text
         assert (stages_counted(running, "ok"), stages_counted(running, "refused")) == (0, 1)
+        assert distinct_sets(running) == (1, 0)  # made one object a call, a set each time: still one
     assert {host["package"] for host in hosts(icinga, "narrow.").values()} == {"_api"}
     assert not stages(icinga, "narrow")
 

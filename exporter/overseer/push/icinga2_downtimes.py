@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
+from collections.abc import Set as AbstractSet
 from typing import Any
 
 from overseer.maintenance.effects import CREATED, REMOVED, EffectStats
@@ -42,12 +43,12 @@ class Icinga2Downtimes:
         self._synced: tuple[int, int] | None = None
         self._resync_at = 0.0
 
-    def due(self, created: Mapping[str, set[str]]) -> bool:
+    def due(self, created: Mapping[str, AbstractSet[str]]) -> bool:
         """True when the windows or the hosts changed since the last sync, or a while passed."""
         changed = self._synced != (self._schedule.revision, _size(created))
         return changed or self._schedule.clock() >= self._resync_at
 
-    def sync(self, created: Mapping[str, set[str]]) -> None:
+    def sync(self, created: Mapping[str, AbstractSet[str]]) -> None:
         """Schedule the downtimes missing and remove those no longer wanted; Icinga2Error on failure.
 
         `created` maps each host this exporter made (found in Icinga at start, or made since) to its
@@ -87,7 +88,7 @@ class Icinga2Downtimes:
         self._resync_at = now + RESYNC_SECONDS
         self.stats.synced(time.time(), 0)
 
-    def cover(self, host: str, services: set[str]) -> None:
+    def cover(self, host: str, services: AbstractSet[str]) -> None:
         """Schedule at once what a host or service just made lacks (before its first result); Icinga2Error.
 
         `host` was just made, or one of its `services`: the next `sync` would be too late for the result
@@ -102,7 +103,7 @@ class Icinga2Downtimes:
         for window in covering:
             self._complete(window, host, services, kept.get((window.key, host), ""))
 
-    def _complete(self, window: Window, host: str, services: set[str], reference: str) -> None:
+    def _complete(self, window: Window, host: str, services: AbstractSet[str], reference: str) -> None:
         """Schedule what `host` and its `services` lack of `window` beside the downtimes in `reference`."""
         names = reference.split()
         if not names:
@@ -150,5 +151,5 @@ class Icinga2Downtimes:
             )
 
 
-def _size(created: Mapping[str, set[str]]) -> int:
+def _size(created: Mapping[str, AbstractSet[str]]) -> int:
     return len(created) + sum(len(services) for services in created.values())

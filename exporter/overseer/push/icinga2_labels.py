@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from collections.abc import Set as AbstractSet
 from typing import Any
 
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error, error_text, object_path
@@ -66,7 +67,7 @@ class HostLabels:
             kept.pop(host, None)
         self._refused.discard(host)
 
-    def sync(self, created: Mapping[str, set[str]]) -> None:
+    def sync(self, created: Mapping[str, AbstractSet[str]]) -> None:
         """Update every host made whose labels changed; Icinga2Error when Icinga cannot be reached.
 
         An update Icinga refuses (an ApiUser without `objects/modify/Host`) is logged and not asked for

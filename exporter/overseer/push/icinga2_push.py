@@ -20,7 +20,8 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Container, Iterator
+from collections.abc import Callable, Container, Iterator, Mapping
+from collections.abc import Set as AbstractSet
 from typing import Any
 
 from overseer.config.icinga2 import Icinga2Config
@@ -43,6 +44,7 @@ from overseer.push.icinga2_results import (
 )
 from overseer.push.icinga2_schedule import next_due
 from overseer.push.retry import Retry
+from overseer.push.shared_sets import NO_NAMES, SharedSets
 from overseer.verdict import Maintenance
 
 log = logging.getLogger(__name__)
@@ -96,9 +98,10 @@ class Icinga2Push:
         self._pending: dict[ResultKey, CheckResult] = {}
         self._signatures: dict[str, tuple[int, RobotMaintenance | None]] = {}  # robot → digest, maintenance
         self._due: dict[str, float] = {}
-        self._groups: dict[str, set[str]] = {}  # robot → every group it had since it was first pushed
+        self._sets = SharedSets()  # the sets below, one object for each distinct set
+        self._groups: dict[str, frozenset[str]] = {}  # robot → every group it had since it was first pushed
         self._robot_hosts: dict[str, str] = {}  # robot → host, for every robot being pushed
-        self._created: dict[str, set[str]] | None = None  # our hosts → our services; None until synced
+        self._created: dict[str, frozenset[str]] | None = None  # our hosts → our services; None until synced
         self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
         self._orphans: dict[str, float] = {}  # our hosts found at start, not yet seen: → deletion time
         self._to_delete: set[str] = set()
@@ -106,11 +109,10 @@ class Icinga2Push:
         self._retry = Retry("Icinga 2 push", log)
         self._package: ConfigPackage | None = ConfigPackage(self._client, config.exporter_id, DEPLOY_SECONDS)
         self._package_paused_until = 0.0
-        self._packaged: dict[str, set[str]] = {}  # hosts of the package → their services in it
+        self._packaged: dict[str, frozenset[str]] = {}  # hosts of the package → their services in it
         self._owed: dict[str, bool] = {}  # robot → urgent, for robots whose results wait for room to be built
-        self._unmade_queued = (
-            True  # a result was queued or owed since the last look whose object may not exist
-        )
+        # A result was queued or owed since the last look whose object may not exist.
+        self._unmade_queued = True
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -225,14 +227,16 @@ class Icinga2Push:
         self._labels.want(host, robot.listing.labels if robot.listing is not None else ())
         self._orphans.pop(host, None)
         self._to_delete.discard(host)
-        groups = self._groups.setdefault(robot.name, set())
-        groups.update(robot_groups(robot))
+        known = self._groups.get(robot.name)
+        groups = set(robot_groups(robot))
         if self._created is not None:  # and those whose services an earlier run of ours made
             groups.update(
                 original_name(service.removeprefix(GROUP_SERVICE_PREFIX))
                 for service in self._created.get(host, ())
                 if service.startswith(GROUP_SERVICE_PREFIX)
             )
+        if known is None or not groups <= known:
+            self._groups[robot.name] = self._sets.share(groups.union(known or ()))
 
     def _queue_results(self, snapshot: FleetSnapshot, robot: RobotState, urgent: bool, now: float) -> None:
         """Queue `robot`'s results now: urgent when its level changed, else as the interval's repeat."""
@@ -317,7 +321,7 @@ class Icinga2Push:
             )
         self._retry.failed(text, now)
 
-    def _find_own_objects(self, now: float) -> dict[str, set[str]]:
+    def _find_own_objects(self, now: float) -> dict[str, frozenset[str]]:
         """The hosts and services this exporter made earlier (before a restart of either side).
 
         No filter expression is sent (Icinga 2.15.4+ may refuse them to a narrow ApiUser): the ApiUser's
@@ -329,11 +333,12 @@ class Icinga2Push:
         created: dict[str, set[str]] = {
             item["name"]: set() for item in hosts["results"] if _exporter_of(item) == mark
         }
+        packaged: dict[str, set[str]] = {}
         for item in hosts["results"]:
             if item["name"] in created:
                 self._labels.found(item["name"], item.get("attrs", {}).get("vars") or {})
                 if item.get("attrs", {}).get("package") == package:
-                    self._packaged[item["name"]] = set()
+                    packaged[item["name"]] = set()
         services = self._client.expect(
             "GET", "/v1/objects/services", {"attrs": ["name", "host_name", "vars", "package"]}
         )
@@ -341,14 +346,15 @@ class Icinga2Push:
             host = item["attrs"]["host_name"]
             if _exporter_of(item) == mark and host in created:
                 created[host].add(item["attrs"]["name"])
-                if host in self._packaged and item["attrs"].get("package") == package:
-                    self._packaged[host].add(item["attrs"]["name"])
+                if host in packaged and item["attrs"].get("package") == package:
+                    packaged[host].add(item["attrs"]["name"])
+        self._packaged.update((host, self._sets.share(services)) for host, services in packaged.items())
         known = set(self._robot_hosts.values())
         for host in created:
             if host not in known:
                 self._orphans[host] = now + self._expire_after
         log.info("found %d hosts of this exporter (%s) in Icinga 2", len(created), mark)
-        return created
+        return {host: self._sets.share(services) for host, services in created.items()}
 
     def _delete_forgotten(self, now: float) -> None:
         assert self._created is not None
@@ -371,7 +377,7 @@ class Icinga2Push:
             return
         assert self._created is not None
         for host in hosts:
-            for service in self._created.get(host, set()) - self._packaged[host]:
+            for service in self._created.get(host, NO_NAMES) - self._packaged[host]:
                 status, _ = self._client.request("DELETE", object_path("services", host, service))
                 if status not in (200, 404):
                     raise Icinga2Error(
@@ -412,7 +418,8 @@ class Icinga2Push:
             self._unmade_queued = False
             return  # made one object a call as their results are delivered
         newest = self._newest(wanted)
-        staged = {host: self._packaged.get(host, set()) | services for host, services in wanted.items()}
+        packaged, share = self._packaged, self._sets.share
+        staged = {host: share(packaged.get(host, NO_NAMES) | services) for host, services in wanted.items()}
         try:
             self._deploy({**self._packaged, **staged}, lambda: self._exists(newest))
         except PackageRefused as error:
@@ -440,8 +447,7 @@ class Icinga2Push:
         self._unmade_queued = False
         for host, services in staged.items():
             self._packaged[host] = services
-            made = created.setdefault(host, set())
-            made.update(services)
+            created[host] = made = self._sets.share(created.get(host, NO_NAMES) | services)
             if self._downtimes is not None:
                 self._downtimes.cover(host, made)
         log.info(
@@ -494,13 +500,13 @@ class Icinga2Push:
         made = self._created.get(host)
         return made is not None and (not service or service in made)
 
-    def _deploy(self, hosts: dict[str, set[str]], loaded: Callable[[], bool]) -> None:
+    def _deploy(self, hosts: Mapping[str, AbstractSet[str]], loaded: Callable[[], bool]) -> None:
         """Make `hosts` and their services the package's content; raises what `ConfigPackage.deploy` does."""
         if self._package is None:
             raise PackageRefused("config packages are not used")
         self._package.deploy(self._stage_text(hosts), loaded)
 
-    def _stage_text(self, hosts: dict[str, set[str]]) -> str:
+    def _stage_text(self, hosts: Mapping[str, AbstractSet[str]]) -> str:
         """The package's content for `hosts` and their services, as one text.
 
         Its objects' texts are let go before the stage is deployed: at 10,000 robots, 70,000 small strings
@@ -600,7 +606,9 @@ class Icinga2Push:
         if status == 404:  # deleted behind our back (or Icinga lost it): create it again next time
             self.stats.failed("http_404")
             if result.service:
-                self._created.get(result.host, set()).discard(result.service)
+                made = self._created.get(result.host)
+                if made is not None:
+                    self._created[result.host] = self._sets.share(made - {result.service})
             else:
                 self._created.pop(result.host, None)
                 self._packaged.pop(result.host, None)  # the package is gone too, or a stage would clash
@@ -639,9 +647,9 @@ class Icinga2Push:
                 self._foreign.add(host)
                 return False
         if service:
-            self._created.setdefault(host, set()).add(service)
+            self._created[host] = self._sets.share(self._created.get(host, NO_NAMES) | {service})
         else:
-            self._created.setdefault(host, set())
+            self._created.setdefault(host, NO_NAMES)
             log.info("Icinga 2 host %s ready", host)
         return True
 
