@@ -6,8 +6,6 @@ queues and what it holds, not what it delivers, which the tests beside this one 
 
 from __future__ import annotations
 
-import contextlib
-import gc
 import sys
 from collections.abc import Callable, Collection
 from dataclasses import replace
@@ -25,6 +23,7 @@ from overseer.push.icinga2_package import object_text
 from overseer.push.icinga2_push import Icinga2Push
 from overseer.push.icinga2_results import CheckResult, ResultKey
 from support.clock import ManualClock
+from support.garbage import left_in_cycles
 from testbed.ports import free_port
 
 ROBOTS = [f"robot{index}" for index in range(10)]
@@ -244,26 +243,11 @@ def test_a_robot_forgotten_while_owed_leaves_nothing_behind(monkeypatch: pytest.
     assert "robot5" not in push._unmade_wanted()
 
 
-def unreachable_garbage(fail: Callable[[], object]) -> int:
-    """Objects in reference cycles that `fail` (raising Icinga2Error, caught here) left for the collector.
-
-    The exporter's collector runs rarely (`garbage_collection`): what a cycle holds stays that long.
-    """
-    gc.collect()
-    gc.disable()
-    try:
-        with contextlib.suppress(Icinga2Error):
-            fail()
-        return gc.collect()
-    finally:
-        gc.enable()
-
-
 def test_a_request_icinga_does_not_answer_leaves_no_reference_cycle() -> None:
     client = Icinga2Client(unreachable_config())
     # The failure named by a local of the frame its traceback holds kept every caller's frame alive: a
     # deploy's, with the stage's whole text (30 MB at 10,000 robots), for each retry while Icinga reloaded.
-    assert unreachable_garbage(lambda: client.request("GET", "/v1/status")) == 0
+    assert left_in_cycles(lambda: client.request("GET", "/v1/status"), Icinga2Error) == []
 
 
 def test_a_delivery_icinga_does_not_answer_leaves_no_reference_cycle() -> None:
@@ -272,7 +256,7 @@ def test_a_delivery_icinga_does_not_answer_leaves_no_reference_cycle() -> None:
     push.step()  # the results queued; Icinga not reached
     push._created = {robot: frozenset({"ros-diagnostics", "ros-diagnostics-Power"}) for robot in ROBOTS}
     batch = list(push._urgent.items())  # every object made: the results go in one pipelined write
-    assert unreachable_garbage(lambda: push._push(batch, push._urgent, clock.now + 60)) == 0
+    assert left_in_cycles(lambda: push._push(batch, push._urgent, clock.now + 60), Icinga2Error) == []
     assert len(push._urgent) == 30  # none delivered, none lost
 
 
