@@ -28,8 +28,9 @@ from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetSnapshot
 from overseer.push import icinga2_push
 from overseer.push.icinga2_names import host_name
+from overseer.push.icinga2_objects import BULK_OBJECTS
 from overseer.push.icinga2_package import dsl_string, object_text, package_name
-from overseer.push.icinga2_push import BULK_OBJECTS, Icinga2Push
+from overseer.push.icinga2_push import Icinga2Push
 from testbed.icinga2 import (
     PUSH_BULK_USER,
     PUSH_USER,
@@ -148,13 +149,12 @@ def stages_counted(running: Exporter, result: str) -> float:
 
 def distinct_sets(running: Exporter) -> tuple[int, int]:
     """How many distinct objects hold the push's services made, and packaged, for its hosts."""
-    push = running.icinga2_push
-    assert push is not None
-    if push._created is None:  # not yet found in Icinga
+    assert running.icinga2_push is not None
+    objects = running.icinga2_push._objects
+    if not objects.found:  # not yet looked for in Icinga
         return -1, -1
-    return len({id(made) for made in push._created.values()}), len(
-        {id(made) for made in push._packaged.values()}
-    )
+    made, packaged = objects.created.values(), objects._packaged.values()
+    return len({id(services) for services in made}), len({id(services) for services in packaged})
 
 
 def stages(daemon: Icinga2, exporter_id: str) -> list[str]:

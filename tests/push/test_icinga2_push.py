@@ -23,7 +23,7 @@ from overseer.config import ConfigError
 from overseer.config.icinga2 import icinga2_config
 from overseer.push.icinga2_client import Icinga2Client, object_path
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
-from overseer.push.icinga2_push import HOST_SILENT_TEXT
+from overseer.push.icinga2_objects import HOST_SILENT_TEXT
 from testbed.icinga2 import (
     PUSH_CERT_USER,
     Icinga2,

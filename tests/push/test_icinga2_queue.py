@@ -17,7 +17,7 @@ from overseer.fleet.interface import FleetPartUnavailable
 from overseer.fleet.level_digests import Signatures
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, FleetSnapshot
-from overseer.push import icinga2_push
+from overseer.push import icinga2_objects, icinga2_push
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error
 from overseer.push.icinga2_package import object_text
 from overseer.push.icinga2_push import Icinga2Push
@@ -84,13 +84,13 @@ def test_a_part_failing_half_way_through_a_look_leaves_the_robots_not_reached_fo
     push.step()  # the first 4 robots queued, then the second ask fails: the look stops there
     first = queued_hosts(push)
     assert len(first) == 4 and set(first) == fleet.asked[0]
-    assert not push._to_delete  # a partial look forgets no robot
+    assert not push._objects._to_delete  # a partial look forgets no robot
 
     clock.now += 1.0
     push.step()  # the next look asks for the 6 robots the first did not reach, and only for them
     assert set().union(*fleet.asked[2:]) == set(ROBOTS) - set(first)
     assert sorted(queued_hosts(push)) == sorted(ROBOTS)  # every robot queued once
-    assert not push._to_delete
+    assert not push._objects._to_delete
 
 
 def test_a_stages_object_texts_are_let_go_before_icinga_validates_it(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -115,11 +115,11 @@ def test_a_stages_object_texts_are_let_go_before_icinga_validates_it(monkeypatch
             """Count the references to each object's text while the stage would be loading."""
             held.extend(references())
 
-    monkeypatch.setattr(icinga2_push, "object_text", recorded)
+    monkeypatch.setattr(icinga2_objects, "object_text", recorded)
     model = FleetModel(FleetLimits(), clock=ManualClock())
     push = Icinga2Push(unreachable_config(), FleetFailingOnce(model, 0), 3600.0)  # type: ignore[arg-type]
-    push._package = Package()  # type: ignore[assignment]
-    push._deploy(
+    push._objects._package = Package()  # type: ignore[assignment]
+    push._objects._deploy(
         {f"robot{index}": {"ros-diagnostics", "ros-diagnostics-Power"} for index in range(3)}, lambda: True
     )
     # Counted the same way once the push let go of everything: a list of them all (30 MB at 10,000 robots)
@@ -160,8 +160,9 @@ def test_robots_beyond_the_queue_are_owed_their_results_and_registered_with_the_
     assert queued_hosts(push) == ["robot0", "robot1"]
     assert list(push._owed) == ROBOTS[2:]
     assert push.stats.read()[2] == 30  # every robot's results wait, built or not
-    push._created = {}  # as found in an empty Icinga: every robot's objects are wanted in the first stage
-    wanted = push._unmade_wanted()
+    # As found in an empty Icinga: every robot's objects are wanted in the first stage.
+    push._objects._created = {}
+    wanted = push._objects.unmade_wanted(push._wanted_keys())
     assert wanted == {robot: {"ros-diagnostics", "ros-diagnostics-Power"} for robot in ROBOTS}
 
     # An owed robot's message changes (its level does not, so no look asks for it): its results, built
@@ -236,11 +237,11 @@ def test_a_robot_forgotten_while_owed_leaves_nothing_behind(monkeypatch: pytest.
     fleet.forgotten.add("robot5")
     push.step()
     state = (push._owed, push._signatures, push._due, push._groups, push._robot_hosts)
-    assert all("robot5" not in held for held in state) and push._to_delete == {"robot5"}
+    assert all("robot5" not in held for held in state) and push._objects._to_delete == {"robot5"}
     assert push.stats.read()[2] == 27  # nine robots' three results, built or owed
     delivered(push)
-    push._created = {}
-    assert "robot5" not in push._unmade_wanted()
+    push._objects._created = {}
+    assert "robot5" not in push._objects.unmade_wanted(push._wanted_keys())
 
 
 def test_a_request_icinga_does_not_answer_leaves_no_reference_cycle() -> None:
@@ -254,7 +255,9 @@ def test_a_delivery_icinga_does_not_answer_leaves_no_reference_cycle() -> None:
     clock = ManualClock(1000.0)
     push = Icinga2Push(unreachable_config(), FleetFailingOnce(robots_model(clock), 0), 3600.0, clock=clock)  # type: ignore[arg-type]
     push.step()  # the results queued; Icinga not reached
-    push._created = {robot: frozenset({"ros-diagnostics", "ros-diagnostics-Power"}) for robot in ROBOTS}
+    push._objects._created = {
+        robot: frozenset({"ros-diagnostics", "ros-diagnostics-Power"}) for robot in ROBOTS
+    }
     batch = list(push._urgent.items())  # every object made: the results go in one pipelined write
     assert left_in_cycles(lambda: push._push(batch, push._urgent, clock.now + 60), Icinga2Error) == []
     assert len(push._urgent) == 30  # none delivered, none lost
