@@ -50,7 +50,7 @@ def holds_until(snapshot: FleetSnapshot, robot: RobotState, timing: RobotTiming)
 class _Known(NamedTuple):
     """What `Signatures` keeps of one robot."""
 
-    robot: RobotState  # the version looked at last
+    version: tuple[int, float, float | None, float | None]  # `_version` of the robot looked at last
     until: float  # until when (monotonic) that version's up and staleness hold
     key: tuple[object, ...]  # its revision, up and staleness
     timing: RobotTiming
@@ -89,7 +89,8 @@ class Signatures:
 
     def _look(self, snapshot: FleetSnapshot, robot: RobotState) -> _Known:
         known = self._known.get(robot.name)
-        if known is not None and known.robot is robot and snapshot.taken_at <= known.until:
+        version = _version(robot)
+        if known is not None and known.version == version and snapshot.taken_at <= known.until:
             return known
         # A robot forgotten and followed again starts its revisions over: its discovery tells them apart.
         revision = (robot.revision, robot.discovered_at)
@@ -97,8 +98,19 @@ class Signatures:
         key = (revision, snapshot.robot_up(robot), snapshot.staleness(robot, timing))
         until = holds_until(snapshot, robot, timing)
         if known is not None and known.key == key:
-            kept = known._replace(robot=robot, until=until)
+            kept = known._replace(version=version, until=until)
         else:
-            kept = _Known(robot, until, key, timing, hash(robot_signature(snapshot, robot)))
+            kept = _Known(version, until, key, timing, hash(robot_signature(snapshot, robot)))
         self._known[robot.name] = kept
         return kept
+
+
+def _version(robot: RobotState) -> tuple[int, float, float | None, float | None]:
+    """What tells one version of `robot` from another: its revision, discovery, last message and departure.
+
+    Not the version itself: kept until the next look, each robot's last one held every component it
+    replaced alive beside the model's (84 B a component, when a fifth of them changed, at every look).
+    A robot's revision changes with anything its judgement depends on but its feeds' times, and every
+    message moves its last message.
+    """
+    return robot.revision, robot.discovered_at, robot.last_message, robot.left_at
