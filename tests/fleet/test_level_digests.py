@@ -104,3 +104,25 @@ def test_a_robot_replaced_since_the_last_look_is_not_kept_alive_by_its_digest() 
     assert signatures.digests(model.snapshot())["a"] == hash(
         robot_signature(model.snapshot(), model.snapshot().robots[0])
     )
+
+
+def test_a_feed_touched_at_the_instant_of_another_feeds_message_moves_the_digest() -> None:
+    clock = ManualClock(100.0)
+    model = FleetModel(FleetLimits(stale_after=5, robot_timeout=60, stale_periods=1), clock=clock)
+    signatures = Signatures()
+    left, right = (
+        DiagnosticArray(0, 0, "", (DiagnosticStatus(0, f"/{side}/part", "m", "hw", ()),))
+        for side in ("Left", "Right")
+    )
+    for clock.now in (100.0, 110.0, 120.0):  # both feeds every 10 s: their components fresh for 10 s
+        model.apply("a", left, "dds", topic="left", feed="left")
+        model.apply("a", right, "dds", topic="right", feed="right")
+    clock.now = 135.0
+    model.apply("a", left, "dds", topic="left", feed="left")
+    looked = signatures.digests(model.snapshot())["a"]  # the right feed's component STALE
+    revision = model.snapshot().robots[0].revision
+    # The right feed republishes the same array at the same clock reading: its own time alone moves.
+    assert model.touch("a", "dds", "right")
+    snapshot = model.snapshot()
+    assert snapshot.robots[0].revision == revision and snapshot.robots[0].last_message == 135.0
+    assert signatures.digests(snapshot)["a"] == hash(robot_signature(snapshot, snapshot.robots[0])) != looked

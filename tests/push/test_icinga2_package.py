@@ -153,7 +153,7 @@ def distinct_sets(running: Exporter) -> tuple[int, int]:
     objects = running.icinga2_push._objects
     if not objects.found:  # not yet looked for in Icinga
         return -1, -1
-    made, packaged = objects.created.values(), objects._packaged.values()
+    made, packaged = list(objects.created.values()), list(objects._packaged.values())  # the push goes on
     return len({id(services) for services in made}), len({id(services) for services in packaged})
 
 

@@ -47,10 +47,14 @@ def holds_until(snapshot: FleetSnapshot, robot: RobotState, timing: RobotTiming)
     return until
 
 
+# A robot's revision, discovery, last message, publisher's departure and its feeds' last messages.
+_Version = tuple[int, float, float | None, float | None, float | tuple[float, ...]]
+
+
 class _Known(NamedTuple):
     """What `Signatures` keeps of one robot."""
 
-    version: tuple[int, float, float | None, float | None]  # `_version` of the robot looked at last
+    version: _Version  # of the robot looked at last
     until: float  # until when (monotonic) that version's up and staleness hold
     key: tuple[object, ...]  # its revision, up and staleness
     timing: RobotTiming
@@ -105,12 +109,15 @@ class Signatures:
         return kept
 
 
-def _version(robot: RobotState) -> tuple[int, float, float | None, float | None]:
-    """What tells one version of `robot` from another: its revision, discovery, last message and departure.
+def _version(robot: RobotState) -> _Version:
+    """What tells one version of `robot` from another for its digest: all it depends on but the records.
 
     Not the version itself: kept until the next look, each robot's last one held every component it
     replaced alive beside the model's (84 B a component, when a fifth of them changed, at every look).
-    A robot's revision changes with anything its judgement depends on but its feeds' times, and every
-    message moves its last message.
+    A robot's revision changes with anything its judgement depends on but its feeds' times: those are
+    its last message and each feed's (a feed touched at the very moment of another's message moves its
+    own time alone).
     """
-    return robot.revision, robot.discovered_at, robot.last_message, robot.left_at
+    feeds = robot.feeds
+    times = feeds[0].last_message if len(feeds) == 1 else tuple([feed.last_message for feed in feeds])
+    return robot.revision, robot.discovered_at, robot.last_message, robot.left_at, times

@@ -87,10 +87,10 @@ class Icinga2Objects:
         """`host`'s robot was forgotten: its host and services are deleted at the next delivery."""
         self._to_delete.add(host)
 
-    def find(self, now: float, known: Collection[str]) -> None:
+    def find(self, now: float, known_hosts: Collection[str]) -> None:
         """Find the hosts and services this exporter made earlier (before a restart of either side).
 
-        Those of robots not `known` are deleted `expire_after` from `now` unless their robots are seen.
+        Those not in `known_hosts` are deleted `expire_after` from `now` unless their robots are seen.
 
         No filter expression is sent (Icinga 2.15.4+ may refuse them to a narrow ApiUser): the ApiUser's
         own permission filter already limits the answer to marked objects, and the mark is checked here.
@@ -118,7 +118,7 @@ class Icinga2Objects:
                     packaged[host].add(item["attrs"]["name"])
         self._packaged.update((host, self._sets.share(services)) for host, services in packaged.items())
         for host in created:
-            if host not in known:
+            if host not in known_hosts:
                 self._orphans[host] = now + self._expire_after
         log.info("found %d hosts of this exporter (%s) in Icinga 2", len(created), mark)
         self._created = {host: self._sets.share(services) for host, services in created.items()}
@@ -215,9 +215,10 @@ class Icinga2Objects:
         self._stats.staged("ok")
         for host, services in staged.items():
             self._packaged[host] = services
-            created[host] = made = self._sets.share(created.get(host, NO_NAMES) | services)
-            if self._downtimes is not None:
-                self._downtimes.cover(host, made)
+            created[host] = self._sets.share(created.get(host, NO_NAMES) | services)
+        if self._downtimes is not None:  # after every host is known staged: a failure here leaves none out
+            for host in staged:
+                self._downtimes.cover(host, created[host])
         log.info(
             "Icinga 2: %d hosts and %d services registered in one stage of package %s",
             hosts_wanted,
