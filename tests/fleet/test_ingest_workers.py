@@ -2,7 +2,7 @@
 
 Every process runs on loopback: DDS with the loopback-only configuration, Zenoh through a router of the
 test's own (a Python session in router mode). Workers are found as the exporter's children started by
-multiprocessing's `spawn` (the other child, multiprocessing's resource tracker, is left alone).
+`overseer.fleet.workers.launch`, and the exporter has no other child.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from overseer.config.events import EventsConfig
 from overseer.config.ingest import IngestConfig
 from overseer.fleet.pooled import PooledFleet
 from overseer.fleet.workers import pool as pool_module
+from overseer.fleet.workers.launch import CHILD_MARKER
 from overseer.fleet.workers.pool import WorkersUnavailable
 from overseer.model.shard import Shard
 from testbed.nagios import run_check
@@ -36,8 +37,13 @@ SERIES_PER_ROBOT = 2 * COMPONENTS  # the simulated leaves and the aggregator's g
 
 
 def worker_pids(exporter: Exporter) -> list[int]:
-    """The pids of the exporter's ingest workers (children started by multiprocessing's spawn)."""
-    pids = []
+    """The pids of the exporter's ingest workers (children started by the workers' launcher)."""
+    return [pid for pid, command in exporter_children(exporter) if CHILD_MARKER.encode() in command]
+
+
+def exporter_children(exporter: Exporter) -> list[tuple[int, bytes]]:
+    """Every child process of the exporter, with its command line."""
+    children = []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -48,9 +54,9 @@ def worker_pids(exporter: Exporter) -> list[int]:
                 command = cmdline.read()
         except OSError:
             continue
-        if parent == exporter.process.pid and b"spawn_main" in command:
-            pids.append(int(entry))
-    return pids
+        if parent == exporter.process.pid:
+            children.append((int(entry), command))
+    return children
 
 
 def robots_served(exporter: Exporter) -> list[str]:
@@ -88,6 +94,8 @@ def test_workers_serve_every_dds_robot_once_through_metrics_api_and_check(
     ):
         wait_for(lambda: every_robot_once(exporter, expected), 30, message="every robot once")
         assert len(worker_pids(exporter)) == 3
+        # No process beside them: `multiprocessing`'s resource tracker held 13 MB for nothing to track.
+        assert sorted(pid for pid, _ in exporter_children(exporter)) == sorted(worker_pids(exporter))
         samples = exporter.samples()
         assert samples["overseer_ingest_workers"][()] == 3.0
         assert all(worker_metric(exporter, "overseer_ingest_worker_up", index) == 1.0 for index in range(3))

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import atexit
-import multiprocessing
 import threading
 from dataclasses import replace
-from multiprocessing.connection import Connection
+from multiprocessing.connection import Connection, Pipe
 
 from overseer.config import Config
 from overseer.config.dds import DdsConfig
 from overseer.config.events import EventsConfig
+from overseer.fleet.workers.launch import start_child
 from overseer.fleet.workers.process import READY, run_worker
 
 EXIT_TIMEOUT_SECONDS = 15.0
@@ -27,13 +27,9 @@ def worker_whose_shutdown_hangs(config: Config, requests: Connection, events: Co
 
 def test_a_worker_ends_when_its_exporter_closes_the_pipe_even_if_the_interpreter_would_hang() -> None:
     config = replace(Config(), dds=replace(DdsConfig(), enabled=False), events=EventsConfig(enabled=False))
-    context = multiprocessing.get_context("spawn")  # as the worker pool starts them
-    requests, child_requests = context.Pipe()
-    events_read, child_events = context.Pipe(duplex=False)
-    process = context.Process(
-        target=worker_whose_shutdown_hangs, args=(config, child_requests, child_events), daemon=True
-    )
-    process.start()
+    requests, child_requests = Pipe()
+    events_read, child_events = Pipe(duplex=False)
+    process = start_child(worker_whose_shutdown_hangs, (config, child_requests, child_events))  # as the pool
     child_requests.close()
     child_events.close()
     try:

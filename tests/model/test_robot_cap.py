@@ -8,16 +8,16 @@ same moment do not both take it.
 
 from __future__ import annotations
 
-import multiprocessing
-from collections.abc import Callable, MutableSequence
-from multiprocessing.synchronize import Barrier
+from collections.abc import Callable
+from multiprocessing.connection import Connection, Pipe
 
+from overseer.fleet.workers.launch import start_child
+from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetLimits, FleetModel, Inventory, ListedRobot
 from overseer.model.robot_cap import SharedRobotCap
 from support.clock import ManualClock
 
-CONTEXT = multiprocessing.get_context("spawn")  # as the worker pool starts its workers
 RACED_ROBOTS = 5_000  # each process tries to take this many
 RACED_CAP = 6_000  # of their 10,000
 
@@ -29,7 +29,7 @@ def an_array() -> DiagnosticArray:
 
 def shared_models(cap: int, workers: int, clock: ManualClock | None = None) -> list[FleetModel]:
     """`workers` models counting their robots together against `cap`."""
-    counts = CONTEXT.RawArray("q", workers)
+    counts = SharedCounts.create(workers).slots
     limits = FleetLimits(max_robots=cap, expire_after=60)
     return [FleetModel(limits, clock, robot_cap=SharedRobotCap(cap, counts, slot)) for slot in range(workers)]
 
@@ -61,14 +61,14 @@ def test_a_robot_forgotten_in_one_worker_makes_room_in_another() -> None:
 
 
 def test_a_worker_started_again_counts_its_robots_from_none() -> None:
-    counts = CONTEXT.RawArray("q", 2)
+    counts = SharedCounts.create(2).slots
     counts[0], counts[1] = 5, 1  # the dead worker's robots, and another worker's
     limits = FleetLimits(max_robots=6)
     restarted = FleetModel(limits, robot_cap=SharedRobotCap(6, counts, 0))
     for index in range(5):
         assert restarted.apply(f"r{index}", an_array(), "dds")
     assert not restarted.apply("r5", an_array(), "dds")
-    assert counts[:] == [5, 1]
+    assert counts.tolist() == [5, 1]
 
 
 def test_a_retired_or_unlisted_robot_gives_its_place_back() -> None:
@@ -124,26 +124,31 @@ def test_a_robot_refused_at_the_cap_writes_nothing() -> None:
     assert counts.writes == 0  # every message of a refused robot asks: no write, no cache line bounced
 
 
-def take_robots(counts: MutableSequence[int], slot: int, start: Barrier) -> None:
+def take_robots(counts: SharedCounts, slot: int, start: Connection) -> None:
     """In a process of its own: try to take `RACED_ROBOTS` robots, at once with the other process."""
-    model = FleetModel(FleetLimits(max_robots=RACED_CAP), robot_cap=SharedRobotCap(RACED_CAP, counts, slot))
-    start.wait(30)
+    cap = SharedRobotCap(RACED_CAP, counts.slots, slot)
+    model = FleetModel(FleetLimits(max_robots=RACED_CAP), robot_cap=cap)
+    start.send("ready")
+    start.recv()  # both models built: go
     for index in range(RACED_ROBOTS):
         model.register(f"w{slot}-r{index}", "dds")
 
 
 def test_two_processes_taking_robots_at_once_take_exactly_the_cap() -> None:
-    counts = CONTEXT.RawArray("q", 2)
-    start = CONTEXT.Barrier(2)  # both models built, then both take robots
-    processes = [CONTEXT.Process(target=take_robots, args=(counts, slot, start)) for slot in range(2)]
+    counts = SharedCounts.create(2)
+    pipes = [Pipe() for _ in range(2)]
+    processes = [start_child(take_robots, (counts, slot, pipes[slot][1])) for slot in range(2)]  # as the pool
     try:
-        for process in processes:
-            process.start()
+        for ours, theirs in pipes:
+            theirs.close()
+            assert ours.poll(30) and ours.recv() == "ready"
+        for ours, _ in pipes:
+            ours.send("go")
         for process in processes:
             process.join(60)
             assert process.exitcode == 0
     finally:
         for process in processes:
             if process.is_alive():
-                process.terminate()
-    assert sum(counts[:]) == RACED_CAP  # each model alone would have taken its 5,000
+                process.kill()
+    assert sum(counts.slots) == RACED_CAP  # each model alone would have taken its 5,000

@@ -8,9 +8,20 @@ robot is refused once the whole fleet holds the cap.
 
 from __future__ import annotations
 
-from collections.abc import MutableSequence
+from collections.abc import Iterator
+from typing import Protocol
 
 ATTEMPTS = 3  # a worker that met another taking the last places at the same moment looks again
+
+
+class Counts(Protocol):
+    """One count a model, each written by its own model and read by all (the workers' `SharedCounts`)."""
+
+    def __getitem__(self, index: int, /) -> int: ...
+
+    def __setitem__(self, index: int, value: int, /) -> None: ...
+
+    def __iter__(self) -> Iterator[int]: ...
 
 
 class RobotCap:
@@ -39,7 +50,7 @@ class SharedRobotCap(RobotCap):
     the cap by a robot a worker.
     """
 
-    def __init__(self, limit: int, counts: MutableSequence[int], slot: int) -> None:
+    def __init__(self, limit: int, counts: Counts, slot: int) -> None:
         """Count this model's robots in `counts[slot]`, from none (a worker started again relearns them)."""
         super().__init__(limit)
         self._counts = counts

@@ -1,24 +1,24 @@
 """The ingest workers of one exporter: started, asked, watched, and restarted when one dies.
 
-Workers are started with `spawn`, not `fork`: the exporter runs threads, and a forked copy of a thread
-holding a lock (logging's, Cyclone's) would wait on it forever.
+Workers are fresh interpreters (`launch.start_child`), not forks: the exporter runs threads, and a forked
+copy of a thread holding a lock (logging's, Cyclone's) would wait on it forever.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection
-from multiprocessing.process import BaseProcess
+from multiprocessing.connection import Connection, Pipe
 from typing import Any, NamedTuple
 
 from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
+from overseer.fleet.workers.launch import ChildProcess, start_child
 from overseer.fleet.workers.process import FAILED, READY, run_worker
+from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.model.events import PackedRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
 
@@ -52,7 +52,7 @@ class _Handle:
 
     index: int
     generation: int  # how many times this worker was restarted before this process
-    process: BaseProcess
+    process: ChildProcess
     requests: Connection
     events: Connection
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -81,8 +81,7 @@ class WorkerPool:
         self.restarts = [0] * self.count
         self._events = events
         self._relay = relay
-        self._context = multiprocessing.get_context("spawn")
-        self._robot_counts = self._context.RawArray("q", self.count)  # each worker's robots, against the cap
+        self._robot_counts = SharedCounts.create(self.count)  # each worker's robots, against the cap
         self._handles: list[_Handle | None] = [None] * self.count
         self._died_at = [0.0] * self.count
         self._restarted_at = [float("-inf")] * self.count
@@ -204,13 +203,13 @@ class WorkerPool:
         handle.ready = False
 
     def _spawn(self, index: int) -> _Handle:
-        requests, child_requests = self._context.Pipe()
-        events, child_events = self._context.Pipe(duplex=False)
+        requests, child_requests = Pipe()
+        events, child_events = Pipe(duplex=False)
         # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
-        relayed, relay_writer = self._context.Pipe(duplex=False) if self._relay else (None, None)
-        process = self._context.Process(
-            target=run_worker,
-            args=(
+        relayed, relay_writer = Pipe(duplex=False) if self._relay else (None, None)
+        process = start_child(
+            run_worker,
+            (
                 self.config,
                 index,
                 self.count,
@@ -220,10 +219,7 @@ class WorkerPool:
                 relayed,
                 self._robot_counts,
             ),
-            name=f"overseer-ingest-{index}",
-            daemon=True,
         )
-        process.start()
         child_requests.close()
         child_events.close()
         if self._relay is not None and relayed is not None and relay_writer is not None:
@@ -274,7 +270,7 @@ class WorkerPool:
                 now = time.monotonic()
                 if not self._died_at[index]:
                     self._died_at[index] = now
-                    self._robot_counts[index] = 0  # its robots are no one's until it relearns them
+                    self._robot_counts.slots[index] = 0  # its robots are no one's until it relearns them
                     log.error(
                         "ingest worker %d (pid %s) exited with code %s; restarting it",
                         index,

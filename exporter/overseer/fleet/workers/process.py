@@ -11,7 +11,6 @@ import os
 import queue
 import signal
 import threading
-from collections.abc import MutableSequence
 from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any, NoReturn
@@ -21,6 +20,7 @@ from overseer.fleet.documents import ComponentQuery
 from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
 from overseer.fleet.workers.merge import portable_robots
+from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.garbage_collection import collect_in_large_batches
 from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
@@ -82,7 +82,7 @@ def run_worker(
     events: Connection,
     start: FleetStart | None = None,
     zenoh_relayed: Connection | None = None,
-    robot_counts: MutableSequence[int] | None = None,
+    robot_counts: SharedCounts | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
@@ -114,7 +114,7 @@ def _serve(
     events: Connection,
     start: FleetStart | None,
     zenoh_relayed: Connection | None,
-    robot_counts: MutableSequence[int] | None,
+    robot_counts: SharedCounts | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
     # Ctrl-C reaches the whole process group, and systemd's stop the whole cgroup: the exporter decides,
@@ -125,7 +125,11 @@ def _serve(
     config = worker_config(config, worker, workers)
     try:
         sink = _EventSender(events).send if config.events.enabled else None
-        cap = None if robot_counts is None else SharedRobotCap(config.fleet.max_robots, robot_counts, worker)
+        cap = (
+            None
+            if robot_counts is None
+            else SharedRobotCap(config.fleet.max_robots, robot_counts.slots, worker)
+        )
         fleet = LocalFleet.build(config, sink, start, zenoh_relayed, cap)
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
