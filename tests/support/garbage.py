@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 import gc
 from collections.abc import Callable
 
+import pytest
+
 
 def left_in_cycles(act: Callable[[], object], failure: type[BaseException]) -> list[object]:
-    """The objects `act` (raising `failure`, caught here) left unreachable in reference cycles.
+    """The objects `act` left unreachable in reference cycles; it must raise `failure` (caught here).
 
     What a cycle holds stays until the collector runs, which in the exporter is seldom
     (`garbage_collection`): a failure's frames, with whatever they named, for the rest of a run.
@@ -17,7 +18,7 @@ def left_in_cycles(act: Callable[[], object], failure: type[BaseException]) -> l
     gc.disable()
     gc.set_debug(gc.DEBUG_SAVEALL)  # what the collector finds unreachable is kept in gc.garbage to look at
     try:
-        with contextlib.suppress(failure):
+        with pytest.raises(failure):  # an act that did not fail would leave nothing, and prove nothing
             act()
         gc.collect()
         return list(gc.garbage)
