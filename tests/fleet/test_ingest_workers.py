@@ -21,7 +21,7 @@ from overseer.config.events import EventsConfig
 from overseer.config.ingest import IngestConfig
 from overseer.fleet.pooled import PooledFleet
 from overseer.fleet.workers import pool as pool_module
-from overseer.fleet.workers.launch import CHILD_MARKER
+from overseer.fleet.workers.launch import CHILD_MARKER, start_child
 from overseer.fleet.workers.pool import WorkersUnavailable
 from overseer.model.shard import Shard
 from testbed.nagios import run_check
@@ -262,6 +262,41 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
         with pytest.raises(WorkersUnavailable, match=r"ingest worker \[1\] did not answer"):
             fleet.prepare_exposition()
         wait_for(lambda: pool.restarts[1] == 4 and pool.up(1), 20, message="restarted a fourth time")
+    finally:
+        fleet.stop()
+
+
+def test_a_worker_whose_process_cannot_be_made_is_tried_again_and_the_supervisor_goes_on(
+    dds_domain: int, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """An in-process pool of real workers; the first restart finds no room for a process (as after an OOM)."""
+    config = replace(
+        Config(),
+        dds=replace(DdsConfig(), loopback_only=True, domains=(DomainConfig(dds_domain),)),
+        events=EventsConfig(enabled=False),
+        ingest=IngestConfig(workers=2),
+    )
+    fleet = PooledFleet(config)
+    fleet.start()
+    pool = fleet.pool
+    made: list[int] = []
+
+    def start_child_failing_once(*args: object) -> object:
+        made.append(1)
+        if len(made) == 1:
+            raise OSError(12, "Cannot allocate memory")
+        return start_child(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pool_module, "start_child", start_child_failing_once)
+    try:
+        dead = pool.pid(0)
+        os.kill(dead or 0, signal.SIGKILL)
+        wait_for(lambda: pool.up(0) and pool.pid(0) != dead, 20, message="the worker made at the second try")
+        assert len(made) == 2
+        assert "ingest worker 0 could not be started: [Errno 12] Cannot allocate memory" in caplog.text
+        assert len(pool.ask_all("robots")) == 2
+        os.kill(pool.pid(0) or 0, signal.SIGKILL)  # the supervisor still watches
+        wait_for(lambda: pool.restarts[0] == 3 and pool.up(0), 20, message="restarted once more")
     finally:
         fleet.stop()
 

@@ -104,3 +104,15 @@ def test_a_child_that_ends_before_reading_its_arguments_leaves_its_exit_code_and
     assert requests.poll(TIMEOUT_SECONDS)
     with pytest.raises(EOFError):
         requests.recv()
+
+
+def test_closed_counts_let_go_of_their_descriptor_and_stay_readable() -> None:
+    counts = SharedCounts.create(2)
+    counts.slots[1] = 7
+    descriptor = counts.fileno()
+    os.fstat(descriptor)
+    counts.close()
+    with pytest.raises(OSError):
+        os.fstat(descriptor)
+    assert counts.slots.tolist() == [0, 7]  # mapped on a descriptor of the mapping's own
+    counts.close()  # twice: nothing more to do

@@ -3,8 +3,9 @@
 `multiprocessing`'s `spawn` also starts a resource tracker, an interpreter of its own (13 MB resident)
 that outlives nothing the workers hold: they share only pipes and `SharedCounts`, which need no cleanup
 by a third process. So a worker is a plain child process: its function and arguments are pickled down
-its standard input, and the pipes (`Connection`) and `SharedCounts` among them are passed as open file
-descriptors under the same numbers. The child imports what the exporter imported, from the same path.
+a pipe of their own, and the pipes (`Connection`) and `SharedCounts` among them are passed as open file
+descriptors under the same numbers. The child imports what the exporter imported, from the same path,
+with the same interpreter options.
 """
 
 from __future__ import annotations
@@ -15,17 +16,19 @@ import os
 import pickle
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from multiprocessing.connection import Connection
 from typing import IO, Any
 
 from overseer.fleet.workers.shared_counts import SharedCounts
 
+CHILD_MARKER = __name__  # in every child's command line, to find them by
+# The child reads the exporter's import path, then the function and its arguments, from descriptor {}.
 _BOOTSTRAP = (
-    "import pickle, sys; sys.path[:] = pickle.load(sys.stdin.buffer); "
-    "from overseer.fleet.workers.launch import run_child; run_child(sys.stdin.buffer)"
+    "import os, pickle, sys; payload = os.fdopen({}, 'rb'); sys.path[:] = pickle.load(payload); "
+    f"from {CHILD_MARKER} import run_child; run_child(payload)"
 )
-CHILD_MARKER = "overseer.fleet.workers.launch"  # in every child's command line, to find them by
 
 
 class ChildProcess:
@@ -38,7 +41,7 @@ class ChildProcess:
 
     @property
     def exitcode(self) -> int | None:
-        """The child's exit status, minus the signal that ended it; None while it runs."""
+        """The child's exit status, or the negated number of the signal that ended it; None while it runs."""
         return self._popen.poll()
 
     def is_alive(self) -> bool:
@@ -60,33 +63,47 @@ def start_child(target: Callable[..., Any], args: Sequence[Any]) -> ChildProcess
 
     Every `Connection` and `SharedCounts` in `args` is the same pipe or memory in the child. Close the
     parent's copies of the child's pipe ends once this returns, so that either side sees the other leave.
+    The arguments are written to the child as it reads them, from a thread of their own: a child that
+    never starts never answers either, which whoever waits for its answer times out on.
     """
     payload = io.BytesIO()
     passed = _ArgumentPickler(payload)
+    pickle.dump(sys.path, payload)
     passed.dump((target, tuple(args)))
-    popen = subprocess.Popen(
-        [sys.executable, "-c", _BOOTSTRAP],
-        stdin=subprocess.PIPE,
-        pass_fds=passed.descriptors,
-    )
-    assert popen.stdin is not None
-    # A child that ends before reading (BrokenPipeError) says why by its exit code and its pipes' end.
-    with contextlib.suppress(BrokenPipeError):
-        pickle.dump(sys.path, popen.stdin)
-        popen.stdin.write(payload.getbuffer())
-    with contextlib.suppress(BrokenPipeError):
-        popen.stdin.close()
+    reader, writer = os.pipe()
+    try:
+        popen = subprocess.Popen(
+            [sys.executable, *_interpreter_options(), "-c", _BOOTSTRAP.format(reader)],
+            pass_fds=[*passed.descriptors, reader],
+        )
+    except BaseException:
+        os.close(writer)
+        raise
+    finally:
+        os.close(reader)
+    threading.Thread(
+        target=_write_payload, args=(writer, payload.getbuffer()), name=f"start-{popen.pid}", daemon=True
+    ).start()
     return ChildProcess(popen)
 
 
-def run_child(stream: IO[bytes]) -> None:
-    """In the child: read the function and its arguments from `stream`, then run it."""
-    target, args = pickle.load(stream)
-    stream.close()
-    nothing = os.open(os.devnull, os.O_RDONLY)  # nothing else comes from the exporter that way
-    os.dup2(nothing, 0)
-    os.close(nothing)
+def run_child(payload: IO[bytes]) -> None:
+    """In the child: read the function and its arguments from `payload`, then run it."""
+    target, args = pickle.load(payload)
+    payload.close()
     target(*args)
+
+
+def _write_payload(descriptor: int, payload: memoryview) -> None:
+    # A child that ends before reading all of it (BrokenPipeError) says why by its exit code.
+    with contextlib.suppress(BrokenPipeError), open(descriptor, "wb") as stream:
+        stream.write(payload)
+
+
+def _interpreter_options() -> list[str]:
+    """The running interpreter's options (`-X dev`, `-W`, `-O`...), passed on as `multiprocessing` does."""
+    options: list[str] = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+    return options
 
 
 class _ArgumentPickler(pickle.Pickler):

@@ -116,6 +116,7 @@ class WorkerPool:
             if handle.process.is_alive():
                 handle.process.kill()
                 handle.process.join(timeout=5)
+        self._robot_counts.close()
 
     def up(self, index: int) -> bool:
         """True while worker `index` runs and has started following its robots."""
@@ -207,19 +208,23 @@ class WorkerPool:
         events, child_events = Pipe(duplex=False)
         # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
         relayed, relay_writer = Pipe(duplex=False) if self._relay else (None, None)
-        process = start_child(
-            run_worker,
-            (
-                self.config,
-                index,
-                self.count,
-                child_requests,
-                child_events,
-                self._start(),
-                relayed,
-                self._robot_counts,
-            ),
+        arguments = (
+            self.config,
+            index,
+            self.count,
+            child_requests,
+            child_events,
+            self._start(),
+            relayed,
+            self._robot_counts,
         )
+        try:
+            process = start_child(run_worker, arguments)
+        except OSError as error:  # no process could be made (out of memory, of descriptors)
+            for end in (requests, child_requests, events, child_events, relayed, relay_writer):
+                if end is not None:
+                    end.close()
+            raise WorkerStartError(f"ingest worker {index} could not be started: {error}") from error
         child_requests.close()
         child_events.close()
         if self._relay is not None and relayed is not None and relay_writer is not None:
@@ -289,7 +294,11 @@ class WorkerPool:
         self.restarts[index] += 1
         self._died_at[index] = 0.0
         self._restarted_at[index] = time.monotonic()
-        handle = self._spawn(index)
+        try:
+            handle = self._spawn(index)
+        except WorkerStartError as error:
+            log.error("%s; trying again", error)
+            return
         try:
             self._await_ready(handle)
         except WorkerStartError as error:

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import mmap
 import os
+import tempfile
+import weakref
 
 SLOT_BYTES = 8
 
 
 class SharedCounts:
-    """`len` signed 64-bit counts in a memory file: the parent creates it, a child attaches by descriptor.
+    """`length` signed 64-bit counts in a memory file: one process creates it, its children map it too.
 
     `slots` is a memoryview on the counts (index, assign, `sum`); `start_child` passes the descriptor.
     """
@@ -17,19 +19,28 @@ class SharedCounts:
     def __init__(self, descriptor: int, length: int) -> None:
         """Map `length` counts of the memory file open as `descriptor` (another process's, or `create`'s)."""
         self._descriptor = descriptor
-        self._map = mmap.mmap(descriptor, max(length, 1) * SLOT_BYTES)
+        self._map = mmap.mmap(descriptor, max(length, 1) * SLOT_BYTES)  # a mapping of its own descriptor
         self.slots = memoryview(self._map).cast("q")[:length]
+        self._close = weakref.finalize(self, os.close, descriptor)
 
     @classmethod
     def create(cls, length: int) -> SharedCounts:
         """`length` new counts, all zero."""
-        descriptor = os.memfd_create("overseer-counts", os.MFD_CLOEXEC)
+        if hasattr(os, "memfd_create"):
+            descriptor = os.memfd_create("overseer-counts", os.MFD_CLOEXEC)
+        else:  # not Linux: a file no one else can open
+            descriptor, path = tempfile.mkstemp(prefix="overseer-counts-")
+            os.unlink(path)
         os.ftruncate(descriptor, max(length, 1) * SLOT_BYTES)
         return cls(descriptor, length)
 
     def fileno(self) -> int:
         """The memory file's descriptor, to pass to a child."""
         return self._descriptor
+
+    def close(self) -> None:
+        """Close the memory file's descriptor (`slots` stay readable until no one holds them)."""
+        self._close()
 
     def __len__(self) -> int:
         """How many counts."""
