@@ -13,6 +13,7 @@ import re
 import signal
 import socket
 import subprocess
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,9 +22,14 @@ import pytest
 
 from overseer.config import ConfigError
 from overseer.config.icinga2 import icinga2_config
+from overseer.messages import DiagnosticArray, DiagnosticStatus
+from overseer.model import FleetLimits, FleetModel
+from overseer.push import icinga2_push
 from overseer.push.icinga2_client import Icinga2Client, object_path
 from overseer.push.icinga2_names import group_pattern, host_name, original_name, robot_name
 from overseer.push.icinga2_objects import HOST_SILENT_TEXT
+from overseer.push.icinga2_push import Icinga2Push
+from support.push_fleet import FleetFailingOnce
 from testbed.icinga2 import (
     PUSH_CERT_USER,
     Icinga2,
@@ -172,6 +178,51 @@ def test_results_sent_in_one_write_get_their_own_answers_in_order(icinga: Icinga
         assert (error, {status for status, _ in again}, len(again)) == (None, {200}, 50)
     finally:
         client.close()
+
+
+class RecordedTicks(threading.Event):
+    """The push's stop event, recording how long each tick waits; set at the first wait of a whole tick."""
+
+    def __init__(self) -> None:
+        """Nothing waited yet."""
+        super().__init__()
+        self.waits: list[float | None] = []
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Note `timeout`; stop the push at a tick's full wait (nothing left to deliver), or after many."""
+        self.waits.append(timeout)
+        if timeout or len(self.waits) > 1000:
+            self.set()
+        return self.is_set()
+
+
+@pytest.mark.servers
+def test_a_push_with_results_still_waiting_delivers_again_without_waiting_a_tick(
+    icinga: Icinga2, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An in-process push into the real Icinga 2, one result a tick: it waits only once nothing is left."""
+    monkeypatch.setattr(icinga2_push, "BATCH_SECONDS", 0.0)  # delivering stops after each result
+    section = json.loads(push_config(tmp_path, icinga, "ticks", "1h").read_text())["icinga2"]
+    model = FleetModel(FleetLimits(stale_after=600, robot_timeout=1200))
+    robots = [f"ticks/robot{index}" for index in range(5)]
+    for robot in robots:
+        model.apply(
+            robot, DiagnosticArray(0, 0, "", (DiagnosticStatus(0, "/Power/Battery", "ok", "", ()),)), "dds"
+        )
+    push = Icinga2Push(icinga2_config(section), FleetFailingOnce(model, 0), 3600.0)  # type: ignore[arg-type]
+    ticks = RecordedTicks()
+    push._stopping = ticks
+    try:
+        push._run()
+    finally:
+        push._client.close()
+    # A host, robot and Power result a robot: 15 deliveries, each followed at once by the next.
+    assert ticks.waits == [0] * 14 + [icinga2_push.TICK_SECONDS]
+    pushed = icinga.api("GET", "/v1/objects/hosts", {"attrs": ["name", "last_check_result"]})["results"]
+    assert sorted(host["name"] for host in pushed if host["name"].startswith("ticks.")) == [
+        host_name(robot) for robot in robots
+    ]
+    assert all(host["attrs"]["last_check_result"] for host in pushed if host["name"].startswith("ticks."))
 
 
 @pytest.mark.servers

@@ -7,16 +7,13 @@ queues and what it holds, not what it delivers, which the tests beside this one 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Collection
-from dataclasses import replace
+from collections.abc import Callable
 
 import pytest
 
 from overseer.config.icinga2 import Icinga2Config
-from overseer.fleet.interface import FleetPartUnavailable
-from overseer.fleet.level_digests import Signatures
 from overseer.messages import DiagnosticArray, DiagnosticStatus
-from overseer.model import FleetLimits, FleetModel, FleetSnapshot
+from overseer.model import FleetLimits, FleetModel
 from overseer.push import icinga2_objects, icinga2_push
 from overseer.push.icinga2_client import Icinga2Client, Icinga2Error
 from overseer.push.icinga2_package import object_text
@@ -24,34 +21,10 @@ from overseer.push.icinga2_push import Icinga2Push
 from overseer.push.icinga2_results import CheckResult, ResultKey
 from support.clock import ManualClock
 from support.garbage import left_in_cycles
+from support.push_fleet import FleetFailingOnce
 from testbed.ports import free_port
 
 ROBOTS = [f"robot{index}" for index in range(10)]
-
-
-class FleetFailingOnce:
-    """The robots of `model`, whose `robots_snapshot` fails on its `fail_at`-th call (a worker restarting)."""
-
-    def __init__(self, model: FleetModel, fail_at: int) -> None:
-        """Serve `model`; fail the `fail_at`-th ask."""
-        self.model = model
-        self.fail_at = fail_at
-        self.asked: list[set[str]] = []
-        self.forgotten: set[str] = set()  # robots the fleet no longer has
-        self._signatures = Signatures()
-
-    def robot_digests(self) -> dict[str, int | None]:
-        """Every robot's digest but the forgotten's."""
-        digests = self._signatures.digests(self.model.snapshot())
-        return {name: digest for name, digest in digests.items() if name not in self.forgotten}
-
-    def robots_snapshot(self, names: Collection[str]) -> FleetSnapshot:
-        """The robots named, or FleetPartUnavailable on the `fail_at`-th call."""
-        self.asked.append(set(names))
-        if len(self.asked) == self.fail_at:
-            raise FleetPartUnavailable("ingest worker 1 is restarting")
-        snapshot = self.model.snapshot()
-        return replace(snapshot, robots=tuple(robot for robot in snapshot.robots if robot.name in names))
 
 
 def unreachable_config() -> Icinga2Config:

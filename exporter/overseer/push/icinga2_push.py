@@ -113,24 +113,28 @@ class Icinga2Push:
 
     def _run(self) -> None:
         while not self._stopping.is_set():
+            behind = False
             try:
-                self.step()
+                behind = self.step()
             except Exception:  # the push must never take the exporter down; it tries again next tick
                 log.exception("Icinga 2 push: unexpected error")
                 self._retry.pause(self._clock() + self._retry.backoff)
-            self._stopping.wait(TICK_SECONDS)
+            self._stopping.wait(0 if behind else TICK_SECONDS)
 
-    def step(self) -> None:
-        """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off."""
+    def step(self) -> bool:
+        """One tick: queue what changed or is due, then deliver for a while if Icinga is not backed off.
+
+        True when delivering ran out of time with results still waiting: the next tick need not wait.
+        """
         now = self._clock()
         try:
             self._queue(now)
         except FleetPartUnavailable as error:
             # A robot missing from a partial snapshot is no robot gone: wait for the whole fleet.
             log.info("Icinga 2 push: not queueing this tick, %s", error)
-        if self._retry.due(now):
-            self._deliver(now)
+        behind = self._retry.due(now) and self._deliver(now) and self._queued() > 0
         self.stats.set_pending(self._queued() + sum(self._key_count(robot) for robot in self._owed))
+        return behind
 
     def _queue(self, now: float) -> None:
         digests = self._fleet.robot_digests()
@@ -276,7 +280,8 @@ class Icinga2Push:
         owed = (key for robot in self._owed for key in self._keys(robot))
         return itertools.chain(self._urgent, self._pending, owed)
 
-    def _deliver(self, now: float) -> None:
+    def _deliver(self, now: float) -> bool:
+        """Deliver queued results for up to `BATCH_SECONDS`; False when Icinga failed (then backed off)."""
         deadline = now + BATCH_SECONDS
         try:
             objects = self._objects
@@ -297,8 +302,9 @@ class Icinga2Push:
                     attempted += self._push(batch, queue, deadline)
         except Icinga2Error as error:
             self._failed(error, now)
-            return
+            return False
         self._retry.succeeded(f"Icinga 2 at {self._config.url} accepts results again")
+        return True
 
     def _failed(self, error: Icinga2Error, now: float) -> None:
         self.stats.failed(error.reason)
