@@ -216,11 +216,8 @@ def test_workers_share_zenoh_robots_and_a_killed_one_relearns_them(tmp_path: Pat
         assert sorted(restarts) == [0.0, 1.0]  # type: ignore[type-var]
 
 
-def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
-    dds_domain: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """An in-process pool of real worker processes (DDS on a domain of its own, no robots); one is stopped."""
-    monkeypatch.setattr(pool_module, "ANSWER_TIMEOUT_SECONDS", 2.0)
+def started_pool_of_two(dds_domain: int) -> PooledFleet:
+    """An in-process pool of two real workers, on a DDS domain of their own, following no robot yet."""
     config = replace(
         Config(),
         dds=replace(DdsConfig(), loopback_only=True, domains=(DomainConfig(dds_domain),)),
@@ -229,6 +226,15 @@ def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
     )
     fleet = PooledFleet(config)
     fleet.start()
+    return fleet
+
+
+def test_a_hung_worker_is_killed_and_restarted_while_the_others_answer(
+    dds_domain: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An in-process pool of real worker processes (DDS on a domain of its own, no robots); one is stopped."""
+    monkeypatch.setattr(pool_module, "ANSWER_TIMEOUT_SECONDS", 2.0)
+    fleet = started_pool_of_two(dds_domain)
     pool = fleet.pool
     try:
         assert len(pool.ask_all("robots")) == 2
@@ -270,14 +276,7 @@ def test_a_worker_whose_process_cannot_be_made_is_tried_again_and_the_supervisor
     dds_domain: int, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     """An in-process pool of real workers; the first restart finds no room for a process (as after an OOM)."""
-    config = replace(
-        Config(),
-        dds=replace(DdsConfig(), loopback_only=True, domains=(DomainConfig(dds_domain),)),
-        events=EventsConfig(enabled=False),
-        ingest=IngestConfig(workers=2),
-    )
-    fleet = PooledFleet(config)
-    fleet.start()
+    fleet = started_pool_of_two(dds_domain)
     pool = fleet.pool
     made: list[int] = []
 
