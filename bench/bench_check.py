@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import socket
 import statistics
 import subprocess
@@ -61,6 +62,7 @@ def report(url: str, robot: str, runs: int) -> None:
         cached = wall_times(commands, runs, cached_environment(cache))
     uncached = wall_times(commands, runs, {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"})
     check = list(commands)[-1]
+    require_judged(commands[check], robot)
     rows = []
     for label, times in (("bytecode cached", cached), ("PYTHONDONTWRITEBYTECODE", uncached)):
         for name in commands:
@@ -82,6 +84,18 @@ def report(url: str, robot: str, runs: int) -> None:
         file=sys.stderr,
     )
     emit(rows)
+
+
+def require_judged(check: list[str], robot: str) -> None:
+    """Exit unless `check` prints `robot`'s verdict: a check that could not judge it is not one to time."""
+    done = subprocess.run(check, capture_output=True, text=True, check=False)
+    first = done.stdout.split("\n", 1)[0]
+    if done.returncode not in (0, 1, 2, 3) or not re.match(
+        rf"(OK|WARNING|CRITICAL|UNKNOWN) - {re.escape(robot)}: ", first
+    ):
+        raise SystemExit(
+            f"{' '.join(check)} did not judge {robot} (exit {done.returncode}): {first}{done.stderr}"
+        )
 
 
 def median(times: dict[str, list[float]], name: str) -> float:

@@ -58,7 +58,14 @@ from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
 
 from bench.bench_alert_rules import PROFILES, alert_counts, observe, target_rows
-from bench.bench_check import CHECK, TARGET_RATIO, cached_environment, shebang_interpreter, wall_times
+from bench.bench_check import (
+    CHECK,
+    TARGET_RATIO,
+    cached_environment,
+    require_judged,
+    shebang_interpreter,
+    wall_times,
+)
 from bench.bench_scrape import PROMETHEUS_ACCEPT, fetch, scrape_durations, scraped_values, static_server
 from bench.bench_status_page import first_render_ms, get_ms
 from bench.change_probe import PROBE_ROBOT, ChangeProbe
@@ -448,6 +455,7 @@ def check_rows(url: str, robot: str, runs: int = CHECK_RUNS) -> list[Row]:
         "python": [shebang_interpreter(CHECK), "-c", "pass"],
         "check": [str(CHECK), "--url", url, "-r", robot],
     }
+    require_judged(commands["check"], robot)
     with tempfile.TemporaryDirectory(prefix="bench-pycache-") as cache:
         times = wall_times(commands, runs, cached_environment(cache))
     check, python = statistics.median(times["check"]), statistics.median(times["python"])
