@@ -58,11 +58,11 @@ def report(url: str, robot: str, runs: int) -> None:
         "check_ros_diagnostics -V": [str(CHECK), "-V"],
         f"check_ros_diagnostics --url … -r {robot}": [str(CHECK), "--url", url, "-r", robot],
     }
+    check = list(commands)[-1]
+    require_judged(commands[check], robot)
     with tempfile.TemporaryDirectory(prefix="bench-pycache-") as cache:
         cached = wall_times(commands, runs, cached_environment(cache))
     uncached = wall_times(commands, runs, {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"})
-    check = list(commands)[-1]
-    require_judged(commands[check], robot)
     rows = []
     for label, times in (("bytecode cached", cached), ("PYTHONDONTWRITEBYTECODE", uncached)):
         for name in commands:

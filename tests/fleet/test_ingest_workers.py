@@ -280,22 +280,26 @@ def test_a_worker_whose_process_cannot_be_made_is_tried_again_and_the_supervisor
     pool = fleet.pool
     made: list[int] = []
 
-    def start_child_failing_once(*args: object) -> object:
+    def start_child_failing_twice(*args: object) -> object:
         made.append(1)
         if len(made) == 1:
             raise OSError(12, "Cannot allocate memory")
+        if len(made) == 2:
+            raise ValueError("a failure no one foresaw")
         return start_child(*args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(pool_module, "start_child", start_child_failing_once)
+    monkeypatch.setattr(pool_module, "start_child", start_child_failing_twice)
     try:
         dead = pool.pid(0)
         os.kill(dead or 0, signal.SIGKILL)
-        wait_for(lambda: pool.up(0) and pool.pid(0) != dead, 20, message="the worker made at the second try")
-        assert len(made) == 2
+        wait_for(lambda: pool.up(0) and pool.pid(0) != dead, 20, message="the worker made at the third try")
+        assert len(made) == 3
         assert "ingest worker 0 could not be started: [Errno 12] Cannot allocate memory" in caplog.text
+        assert "ingest worker 0 could not be restarted; trying again" in caplog.text
+        assert caplog.text.count(f"(pid {dead}) exited") == 1  # its death told once, not at each try
         assert len(pool.ask_all("robots")) == 2
         os.kill(pool.pid(0) or 0, signal.SIGKILL)  # the supervisor still watches
-        wait_for(lambda: pool.restarts[0] == 3 and pool.up(0), 20, message="restarted once more")
+        wait_for(lambda: pool.restarts[0] == 4 and pool.up(0), 20, message="restarted once more")
     finally:
         fleet.stop()
 

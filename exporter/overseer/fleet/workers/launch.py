@@ -74,6 +74,7 @@ def start_child(target: Callable[..., Any], args: Sequence[Any]) -> ChildProcess
     try:
         popen = subprocess.Popen(
             [sys.executable, *_interpreter_options(), "-c", _BOOTSTRAP.format(reader)],
+            stdin=subprocess.DEVNULL,  # nothing for a worker to read from the exporter's terminal
             pass_fds=[*passed.descriptors, reader],
         )
     except BaseException:
@@ -81,9 +82,15 @@ def start_child(target: Callable[..., Any], args: Sequence[Any]) -> ChildProcess
         raise
     finally:
         os.close(reader)
-    threading.Thread(
-        target=_write_payload, args=(writer, payload.getbuffer()), name=f"start-{popen.pid}", daemon=True
-    ).start()
+    try:
+        threading.Thread(
+            target=_write_payload, args=(writer, payload.getbuffer()), name=f"start-{popen.pid}", daemon=True
+        ).start()
+    except BaseException:  # no thread to write with (RuntimeError): a child left waiting would wait for good
+        os.close(writer)
+        popen.kill()
+        popen.wait()
+        raise
     return ChildProcess(popen)
 
 

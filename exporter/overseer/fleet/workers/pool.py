@@ -204,26 +204,26 @@ class WorkerPool:
         handle.ready = False
 
     def _spawn(self, index: int) -> _Handle:
-        requests, child_requests = Pipe()
-        events, child_events = Pipe(duplex=False)
-        # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
-        relayed, relay_writer = Pipe(duplex=False) if self._relay else (None, None)
-        arguments = (
-            self.config,
-            index,
-            self.count,
-            child_requests,
-            child_events,
-            self._start(),
-            relayed,
-            self._robot_counts,
-        )
+        made: list[Connection] = []  # every pipe end made, closed again if the worker cannot be started
         try:
+            requests, child_requests = _pipe(made)
+            events, child_events = _pipe(made, duplex=False)
+            # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
+            relayed, relay_writer = _pipe(made, duplex=False) if self._relay else (None, None)
+            arguments = (
+                self.config,
+                index,
+                self.count,
+                child_requests,
+                child_events,
+                self._start(),
+                relayed,
+                self._robot_counts,
+            )
             process = start_child(run_worker, arguments)
-        except OSError as error:  # no process could be made (out of memory, of descriptors)
-            for end in (requests, child_requests, events, child_events, relayed, relay_writer):
-                if end is not None:
-                    end.close()
+        except (OSError, RuntimeError) as error:  # out of memory, descriptors or threads
+            for end in made:
+                end.close()
             raise WorkerStartError(f"ingest worker {index} could not be started: {error}") from error
         child_requests.close()
         child_events.close()
@@ -283,7 +283,10 @@ class WorkerPool:
                         handle.process.exitcode,
                     )
                 if now - self._restarted_at[index] >= RESTART_DELAY_SECONDS:
-                    self._restart(index, handle)
+                    try:
+                        self._restart(index, handle)
+                    except Exception:  # the supervisor must go on watching, and try again
+                        log.exception("ingest worker %d could not be restarted; trying again", index)
 
     def _restart(self, index: int, dead: _Handle) -> None:
         if self._stopping.is_set():
@@ -292,13 +295,13 @@ class WorkerPool:
             dead.ready = False
             dead.requests.close()  # its events pipe is closed by its relay thread, at end of file
         self.restarts[index] += 1
-        self._died_at[index] = 0.0
         self._restarted_at[index] = time.monotonic()
         try:
             handle = self._spawn(index)
         except WorkerStartError as error:
             log.error("%s; trying again", error)
             return
+        self._died_at[index] = 0.0  # a new process runs: its death, if it comes, is told anew
         try:
             self._await_ready(handle)
         except WorkerStartError as error:
@@ -306,3 +309,10 @@ class WorkerPool:
             handle.process.kill()
             return
         log.info("ingest worker %d restarted (pid %s)", index, handle.process.pid)
+
+
+def _pipe(made: list[Connection], duplex: bool = True) -> tuple[Connection, Connection]:
+    """A new pipe; both its ends are noted in `made`."""
+    ends = Pipe(duplex)
+    made.extend(ends)
+    return ends
