@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from bench.common import process_tree
 from overseer.config import Config
 from overseer.config.dds import DdsConfig, DomainConfig
 from overseer.config.events import EventsConfig
@@ -37,26 +38,20 @@ SERIES_PER_ROBOT = 2 * COMPONENTS  # the simulated leaves and the aggregator's g
 
 
 def worker_pids(exporter: Exporter) -> list[int]:
-    """The pids of the exporter's ingest workers (children started by the workers' launcher)."""
-    return [pid for pid, command in exporter_children(exporter) if CHILD_MARKER.encode() in command]
+    """The pids of the exporter's ingest workers (started by the workers' launcher)."""
+    return [pid for pid, command in exporter_descendants(exporter) if CHILD_MARKER.encode() in command]
 
 
-def exporter_children(exporter: Exporter) -> list[tuple[int, bytes]]:
-    """Every child process of the exporter, with its command line."""
-    children = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
+def exporter_descendants(exporter: Exporter) -> list[tuple[int, bytes]]:
+    """Every process descending from the exporter, with its command line."""
+    descendants = []
+    for pid in process_tree(exporter.process.pid)[1:]:
         try:
-            with open(f"/proc/{entry}/stat") as stat:
-                parent = int(stat.read().rsplit(")", 1)[1].split()[1])
-            with open(f"/proc/{entry}/cmdline", "rb") as cmdline:
-                command = cmdline.read()
+            with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+                descendants.append((pid, cmdline.read()))
         except OSError:
-            continue
-        if parent == exporter.process.pid:
-            children.append((int(entry), command))
-    return children
+            continue  # it ended meanwhile
+    return descendants
 
 
 def robots_served(exporter: Exporter) -> list[str]:
@@ -95,7 +90,7 @@ def test_workers_serve_every_dds_robot_once_through_metrics_api_and_check(
         wait_for(lambda: every_robot_once(exporter, expected), 30, message="every robot once")
         assert len(worker_pids(exporter)) == 3
         # No process beside them: `multiprocessing`'s resource tracker held 13 MB for nothing to track.
-        assert sorted(pid for pid, _ in exporter_children(exporter)) == sorted(worker_pids(exporter))
+        assert sorted(pid for pid, _ in exporter_descendants(exporter)) == sorted(worker_pids(exporter))
         samples = exporter.samples()
         assert samples["overseer_ingest_workers"][()] == 3.0
         assert all(worker_metric(exporter, "overseer_ingest_worker_up", index) == 1.0 for index in range(3))
