@@ -15,7 +15,7 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Collection, Iterable, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -346,3 +346,47 @@ def test_a_stage_icinga_rejects_changes_nothing_and_robots_are_registered_one_a_
     assert made["clash.robot3"]["vars"] == {"owner": "operator"}  # left alone
     assert {host["package"] for name, host in made.items() if name != "clash.robot3"} == {"_api"}
     assert not stages(icinga, "clash")  # the rejected stage is not kept
+
+
+def test_registered_robots_results_go_on_while_a_stage_for_new_robots_is_deployed(
+    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # At 10,000 robots Icinga validates and loads a stage for a minute or more: deployed by the push's own
+    # thread, it held back every registered robot's results that long, past their TTL.
+    caplog.set_level(logging.INFO, logger="overseer.push")
+    robots = [f"beside/robot{index}" for index in range(ROBOTS)]
+    with exporter(tmp_path, icinga, "beside", PUSH_BULK_USER, robots) as running:
+        assert running.model is not None and running.icinga2_push is not None
+        wait_for(lambda: all_pushed(icinga, "beside.robot", ROBOTS, 3), timeout=90, message="robots pushed")
+        package = running.icinga2_push._objects._package
+        assert package is not None
+        deploy, started, release = package.deploy, threading.Event(), threading.Event()
+
+        def held_back(text: str, loaded: Callable[[], bool]) -> None:
+            """The real deploy, once the test lets it go: a stage Icinga takes long to validate."""
+            started.set()
+            assert release.wait(60), "the test never let the stage go"
+            deploy(text, loaded)
+
+        package.deploy = held_back  # type: ignore[method-assign]
+        newcomers = [f"beside/new{index}" for index in range(ROBOTS)]
+        for robot in newcomers:
+            running.model.apply(robot, robot_array(0), "dds")
+        assert started.wait(30), "no stage for the newcomers"
+        changed_at = time.time()
+        running.model.apply("beside/robot1", robot_array(2), "dds")  # a change while the stage waits
+
+        def delivered() -> bool:
+            result = services(icinga, "beside.robot1")["ros-diagnostics-Power"]["last_check_result"]
+            return bool(result["execution_end"] >= changed_at)  # its only results since: of the change
+
+        try:
+            wait_for(delivered, timeout=30, message="robot1's change delivered while the stage is deployed")
+            assert hosts(icinga, "beside.new") == {}  # none made one a call beside the stage
+        finally:
+            release.set()
+        wait_for(lambda: all_pushed(icinga, "beside.new", ROBOTS, 3), timeout=90, message="newcomers pushed")
+        assert (stages_counted(running, "ok"), stages_counted(running, "rejected")) == (2, 0)
+        counts = running.icinga2_push.stats.read()[0]
+        assert [reason for reason, count in counts.items() if count and reason != "ok"] == []  # the reload
+    assert {host["package"] for host in hosts(icinga, "beside.").values()} == {"overseer-beside"}

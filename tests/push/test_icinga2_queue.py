@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from threading import Event
 
 import pytest
 
@@ -25,6 +26,7 @@ from support.push_fleet import FleetFailingOnce
 from testbed.ports import free_port
 
 ROBOTS = [f"robot{index}" for index in range(10)]
+SERVICES = frozenset({"ros-diagnostics", "ros-diagnostics-Power"})  # a robot's, with one group
 
 
 def unreachable_config() -> Icinga2Config:
@@ -261,3 +263,92 @@ def test_robots_with_the_same_groups_hold_one_set_of_them() -> None:
     # A set of strings a robot was 24 MB at 10,000 robots: nine robots in Power share one, robot9 its own.
     assert len({id(groups) for groups in push._groups.values()}) == 2
     assert push._groups["robot9"] == {"Power", "Motor"} and push._groups["robot0"] == {"Power"}
+
+
+class HeldPackage:
+    """A config package whose stages Icinga validates and loads until the test lets them end."""
+
+    name = "overseer-test"
+
+    def __init__(self) -> None:
+        """No stage deployed yet."""
+        self.release = Event()
+        self.texts: list[str] = []
+
+    def deploy(self, text: str, loaded: Callable[[], bool]) -> None:
+        """Keep the stage's text; end once released."""
+        self.texts.append(text)
+        assert self.release.wait(30), "the test never let the stage end"
+
+
+def push_beside_a_held_stage(
+    monkeypatch: pytest.MonkeyPatch, clock: ManualClock
+) -> tuple[Icinga2Push, HeldPackage]:
+    """A push whose first five robots are registered, and whose stages are held; Icinga is not reached."""
+    monkeypatch.setattr(icinga2_objects, "BULK_OBJECTS", 10)  # the other five robots' 15 objects: a stage
+    push = Icinga2Push(unreachable_config(), FleetFailingOnce(robots_model(clock), 0), 3600.0, clock=clock)  # type: ignore[arg-type]
+    package = HeldPackage()
+    push._objects._package = package  # type: ignore[assignment]
+    push._objects._created = {robot: SERVICES for robot in ROBOTS[:5]}  # as found in Icinga
+    push._objects._packaged = dict(push._objects._created)
+    return push, package
+
+
+def test_while_a_stage_is_deployed_robots_it_registers_wait_for_it_and_icinga_away_is_a_reload_for_a_while(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = ManualClock(1000.0)
+    push, package = push_beside_a_held_stage(monkeypatch, clock)
+    try:
+        push.step()
+        assert push._objects.stage_in_flight and len(package.texts) == 1 and '"robot9"' in package.texts[0]
+        # The registered robots' results go (and stay queued, unanswered); the others wait for the stage.
+        assert sorted(queued_hosts(push)) == ROBOTS[:5] and sorted(push._owed) == ROBOTS[5:]
+        # Icinga's API away while it reloads to run a stage: no failure counted, no backoff.
+        assert push.stats.read()[0] == {"ok": 0} and push._retry.backoff == 1.0
+        asks = len(push._fleet.asked)  # type: ignore[attr-defined]
+        clock.now += 1.0
+        push.step()  # the robots waiting for the stage are not asked for again
+        assert push._fleet.asked[asks:] == []  # type: ignore[attr-defined]
+        assert sorted(queued_hosts(push)) == ROBOTS[:5] and sorted(push._owed) == ROBOTS[5:]
+        assert push.stats.read()[0] == {"ok": 0}
+        clock.now += 31.0
+        push.step()  # away for longer than a reload: a failure
+        assert push.stats.read()[0] == {"ok": 0, "connection": 1} and push._retry.backoff == 2.0
+    finally:
+        package.release.set()
+        assert push._objects._stage is not None
+        push._objects._stage.join(5)
+    clock.now += 10.0
+    push.step()  # the stage's end taken into account: its robots registered
+    assert not push._objects.stage_in_flight and set(push._objects.created) == set(ROBOTS)
+    assert push.stats.stages() == {"ok": 1}
+    assert push.stats.read()[0] == {"ok": 0, "connection": 2}  # no stage now: Icinga away is a failure
+    clock.now += 1.0
+    push.step()  # and their results built
+    assert sorted(queued_hosts(push)) == ROBOTS and not push._owed
+
+
+def test_a_forgotten_robot_of_the_package_waits_for_the_stage_being_deployed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = ManualClock(1000.0)
+    push, package = push_beside_a_held_stage(monkeypatch, clock)
+    objects = push._objects
+    keys = [(robot, service) for robot in ROBOTS for service in ("", *SERVICES)]
+    assert not objects.register_in_bulk(keys, clock.now)  # the other five robots' stage, deployed
+    objects._to_delete = {"robot0", "robot9"}  # one of the package, one of the stage
+    try:
+        objects.delete_forgotten(clock.now)  # nothing: a stage without them now would race the one deployed
+        assert objects._to_delete == {"robot0", "robot9"} and len(package.texts) == 1
+    finally:
+        package.release.set()
+        assert objects._stage is not None
+        objects._stage.join(5)
+    assert objects.register_in_bulk(keys, clock.now) and "robot9" in objects._packaged
+    objects.delete_forgotten(clock.now)  # now they go, with a stage of the package without them
+    assert (
+        len(package.texts) == 2 and '"robot0"' not in package.texts[1] and '"robot9"' not in package.texts[1]
+    )
+    assert '"robot1"' in package.texts[1] and '"robot8"' in package.texts[1]
+    assert not objects._to_delete and set(objects.created) == set(ROBOTS) - {"robot0", "robot9"}

@@ -10,6 +10,7 @@ ApiUser may, as one object a call would take Icinga 2 hours at 10,000 robots.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Collection, Iterable, Mapping
 from collections.abc import Set as AbstractSet
 from typing import Any
@@ -22,6 +23,7 @@ from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import robot_name
 from overseer.push.icinga2_package import ConfigPackage, PackageRefused, PackageRejected, object_text
 from overseer.push.icinga2_results import CheckResult, ResultKey
+from overseer.push.icinga2_stage import StageInFlight
 from overseer.push.shared_sets import NO_NAMES, SharedSets
 
 log = logging.getLogger(__name__)
@@ -59,9 +61,55 @@ class Icinga2Objects:
         self._foreign: set[str] = set()  # hosts of the same name not made by this exporter
         self._orphans: dict[str, float] = {}  # our hosts found at start, not yet seen: → deletion time
         self._to_delete: set[str] = set()
-        self._package: ConfigPackage | None = ConfigPackage(client, config.exporter_id, DEPLOY_SECONDS)
+        self._stopping = threading.Event()
+        # A stage deploys beside the push's deliveries: on a connection of its own.
+        self._stage_client = Icinga2Client(config)
+        self._package: ConfigPackage | None = ConfigPackage(
+            self._stage_client, config.exporter_id, DEPLOY_SECONDS, sleep=self._stage_sleep
+        )
         self._package_paused_until = 0.0
         self._packaged: dict[str, frozenset[str]] = {}  # hosts of the package → their services in it
+        self._stage: StageInFlight | None = None
+
+    def close(self) -> None:
+        """Stop waiting for a stage being deployed, and drop its connection."""
+        self._stopping.set()
+        if self._stage is not None:
+            self._stage.join(self._config.timeout + 1)
+        self._stage_client.close()
+
+    def _stage_sleep(self, seconds: float) -> None:
+        """A deploy's wait between two looks at Icinga, cut short (Icinga2Error) when the push stops."""
+        if self._stopping.wait(seconds):
+            raise Icinga2Error("stopped", "the push stopped while a stage was being deployed")
+
+    @property
+    def stage_in_flight(self) -> bool:
+        """Whether a stage is being deployed, or ended and not yet taken into account (`end_stage`)."""
+        return self._stage is not None
+
+    def waits_for_stage(self, key: ResultKey) -> bool:
+        """Whether the object of a result with `key` waits for a stage: the one deployed, or the next.
+
+        A new host, or a new service of a host of the package; a new service of a host made one a call
+        is made one a call, as a stage would not register it (`unmade_wanted`).
+        """
+        if self._stage is None or self.made(key):
+            return False
+        host = key[0]
+        return host not in self.created or host in self._packaged
+
+    def host_waits_for_stage(self, host: str) -> bool:
+        """Whether `host` waits for a stage, or the stage deployed registers services of it."""
+        return self._stage is not None and (host in self._stage.staged or self.waits_for_stage((host, "")))
+
+    def end_stage(self, now: float) -> None:
+        """Take the stage deployed into account once it ended: its objects made, or the package given up.
+
+        Raises Icinga2Error when its deploy failed.
+        """
+        if self._stage is not None and self._stage.done:
+            self._stage_ended(now)
 
     @property
     def found(self) -> bool:
@@ -124,14 +172,22 @@ class Icinga2Objects:
         self._created = {host: self._sets.share(services) for host, services in created.items()}
 
     def delete_forgotten(self, now: float) -> None:
-        """Delete the hosts of robots forgotten, and of those found at start and not seen since."""
+        """Delete the hosts of robots forgotten, and of those found at start and not seen since.
+
+        While a stage is deployed, those of the package or of the stage wait for it to end: a stage
+        without them now would race it.
+        """
         assert self._created is not None
         for host, when in list(self._orphans.items()):
             if now >= when:
                 self._to_delete.add(host)
                 del self._orphans[host]
-        self._unpackage([host for host in self._to_delete if host in self._packaged])
+        stage = self._stage
+        if stage is None:
+            self._unpackage([host for host in self._to_delete if host in self._packaged])
         for host in list(self._to_delete):
+            if stage is not None and (host in self._packaged or host in stage.staged):
+                continue
             if host in self._created:
                 status, _ = self._client.request("DELETE", object_path("hosts", host) + "?cascade=1")
                 if status not in (200, 404):
@@ -174,9 +230,13 @@ class Icinga2Objects:
 
         New hosts with their services, and new services of the package's hosts: robots declared before
         they publish (an inventory, tokens heard first) get their hosts before their groups are known.
-        True when they are registered, or few enough to be made one a call; False when the package is
-        not used, paused, or Icinga would not take its stage.
+        True when they are registered, or few enough to be made one a call; False while a stage deploys
+        them (in a thread of its own: `stage_in_flight`), and when the package is not used,
+        paused, or Icinga would not take its stage. Raises Icinga2Error when a stage's deploy failed.
         """
+        self.end_stage(now)
+        if self._stage is not None:
+            return False
         if self._package is None or now < self._package_paused_until:
             return False
         assert self._created is not None
@@ -189,8 +249,22 @@ class Icinga2Objects:
         newest = self._newest(wanted)
         packaged, share = self._packaged, self._sets.share
         staged = {host: share(packaged.get(host, NO_NAMES) | services) for host, services in wanted.items()}
+        package, text = self._package, self._stage_text({**self._packaged, **staged})
+        self._stage = StageInFlight(
+            staged,
+            hosts_wanted,
+            services_wanted,
+            lambda: package.deploy(text, lambda: self._exists(newest, self._stage_client)),
+        )
+        return False
+
+    def _stage_ended(self, now: float) -> None:
+        """Take the ended stage's outcome into account: its objects made, or the package given up."""
+        assert self._stage is not None and self._created is not None and self._package is not None
+        stage, self._stage = self._stage, None
+        staged, created = stage.staged, self._created
         try:
-            self._deploy({**self._packaged, **staged}, lambda: self._exists(newest))
+            stage.raise_failure()
         except PackageRefused as error:
             self._stats.staged("refused")
             log.info(
@@ -199,19 +273,19 @@ class Icinga2Objects:
                 error,
             )
             self._package = None
-            return False
+            return
         except PackageRejected as error:
             self._stats.staged("rejected")
             log.warning(
                 "Icinga 2 rejected a stage of package %s registering %d robots (%s): registering them one "
                 "object a call for %gs",
                 self._package.name,
-                len(wanted),
+                len(staged),
                 error,
                 PACKAGE_PAUSE_SECONDS,
             )
             self._package_paused_until = now + PACKAGE_PAUSE_SECONDS
-            return False
+            return
         self._stats.staged("ok")
         for host, services in staged.items():
             self._packaged[host] = services
@@ -221,11 +295,10 @@ class Icinga2Objects:
                 self._downtimes.cover(host, created[host])
         log.info(
             "Icinga 2: %d hosts and %d services registered in one stage of package %s",
-            hosts_wanted,
-            services_wanted,
+            stage.hosts,
+            stage.services,
             self._package.name,
         )
-        return True
 
     def unmade_wanted(self, keys: Iterable[ResultKey]) -> dict[str, set[str]]:
         """The objects of results with `keys` a stage may register: hosts not made, services not ours.
@@ -297,8 +370,8 @@ class Icinga2Objects:
     def _package_name(self) -> str:
         return "(none)" if self._package is None else self._package.name
 
-    def _exists(self, path: str) -> bool:
-        status, document = self._client.request("GET", path, {"attrs": ["name"]})
+    def _exists(self, path: str, client: Icinga2Client | None = None) -> bool:
+        status, document = (client or self._client).request("GET", path, {"attrs": ["name"]})
         if status not in (200, 404):
             reason = error_text(document)
             raise Icinga2Error(f"http_{status}", f"reading {path}: HTTP {status}: {reason}", status)

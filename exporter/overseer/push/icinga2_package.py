@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 
 POLL_SECONDS = 0.25
 CONFIG_FILE = "conf.d/overseer.conf"
+# How a request fails while Icinga 2 reloads (its API away for a moment): no failure of Icinga's.
+RELOADING_REASONS = frozenset({"connection", "tls", "http_503"})
 _UNSAFE_NAME = re.compile(r"[^A-Za-z0-9_-]")
 _ERROR_LINE = re.compile(r"critical/config: (.*)")
 _T = TypeVar("_T")
@@ -163,7 +165,7 @@ class ConfigPackage:
         try:
             return read()
         except Icinga2Error as error:
-            if error.reason in ("connection", "tls", "http_503"):
+            if error.reason in RELOADING_REASONS:
                 return None
             raise
 

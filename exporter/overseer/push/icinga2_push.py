@@ -31,6 +31,7 @@ from overseer.push.icinga2_labels import HostLabels
 from overseer.push.icinga2_metrics import PushStats
 from overseer.push.icinga2_names import GROUP_SERVICE_PREFIX, host_name, original_name
 from overseer.push.icinga2_objects import Icinga2Objects
+from overseer.push.icinga2_package import RELOADING_REASONS
 from overseer.push.icinga2_results import (
     CheckResult,
     ResultKey,
@@ -52,6 +53,7 @@ SNAPSHOT_ROBOTS = 500  # robots asked of the fleet at once, their results queued
 # Results built and held at once: further robots are owed theirs, built as these are delivered. A fleet
 # first heard would otherwise hold every robot's (70,000 at 10,000 robots, 100 MB) through its first stage.
 QUEUED_RESULTS = 2000
+RELOAD_SECONDS = 30.0  # Icinga's API away this long while a stage is deployed is a reload; longer, a failure
 
 
 class Icinga2Push:
@@ -97,6 +99,7 @@ class Icinga2Push:
         self._owed: dict[str, bool] = {}  # robot → urgent, for robots whose results wait for room to be built
         # A result was queued or owed since the last look whose object may not exist.
         self._unmade_queued = True
+        self._away_since: float | None = None  # Icinga's API away since, while a stage was deployed
 
     def start(self) -> None:
         """Run the loop in a daemon thread."""
@@ -109,6 +112,7 @@ class Icinga2Push:
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=self._config.timeout + 5)
+        self._objects.close()
         self._client.close()
 
     def _run(self) -> None:
@@ -147,7 +151,12 @@ class Icinga2Push:
             signature = (digest, None if schedule is None else schedule.state(name, active))
             if signature != self._signatures.get(name) or now >= self._due.get(name, 0.0):
                 signatures[name] = signature
-        waiting = [name for name in self._owed if name not in signatures and digests.get(name) is not None]
+        host_waits, hosts = self._objects.host_waits_for_stage, self._robot_hosts
+        waiting = [  # those whose host waits for a stage are not asked for: they would be owed again
+            name
+            for name in self._owed
+            if name not in signatures and digests.get(name) is not None and not host_waits(hosts[name])
+        ]
         self._queue_in_turn(signatures, waiting, now)
         for gone in [name for name in self._robot_hosts if name not in digests]:
             host = self._robot_hosts.pop(gone)
@@ -189,7 +198,7 @@ class Icinga2Push:
                     urgent = urgent or signature != self._signatures.get(robot.name)
                     self._signatures[robot.name] = signature
                 self._know(robot)
-                if self._queued() < QUEUED_RESULTS:
+                if self._queued() < QUEUED_RESULTS and not self._waits_for_stage(robot.name):
                     self._queue_results(snapshot, robot, urgent, now)
                 else:
                     self._owe(robot.name, urgent)
@@ -260,6 +269,23 @@ class Icinga2Push:
         if not self._unmade_queued and not all(self._objects.made(key) for key in keys):
             self._unmade_queued = True
 
+    def _waits_for_stage(self, robot: str) -> bool:
+        """Whether an object of `robot`'s waits for a stage: so do its results."""
+        objects = self._objects
+        return objects.stage_in_flight and any(map(objects.waits_for_stage, self._keys(robot)))
+
+    def _owe_waiting_for_stage(self) -> None:
+        """While a stage is deployed, robots with a result queued whose object waits for a stage owe it.
+
+        Delivered now, their objects would be made one a call: beside the stage that makes them, or one
+        at a time where the next stage would make them all.
+        """
+        waits = self._objects.waits_for_stage
+        hosts = {key[0] for queue in (self._urgent, self._pending) for key in queue if waits(key)}
+        if hosts:
+            for robot in [robot for robot, host in self._robot_hosts.items() if host in hosts]:
+                self._owe(robot, False)
+
     def _keys(self, robot: str) -> list[ResultKey]:
         """The keys of `robot`'s results: its host's, then its services'."""
         host = self._robot_hosts[robot]
@@ -287,9 +313,12 @@ class Icinga2Push:
             objects = self._objects
             if not objects.found:
                 objects.find(now, set(self._robot_hosts.values()))
+            objects.end_stage(now)
             objects.delete_forgotten(now)
             if self._unmade_queued and objects.register_in_bulk(self._wanted_keys(), now):
                 self._unmade_queued = False
+            if objects.stage_in_flight:
+                self._owe_waiting_for_stage()
             if self._downtimes is not None and self._downtimes.due(objects.created):
                 # Before the results (and, after a restart, right after finding our hosts): a host in a
                 # window is in downtime when its robot's DOWN arrives, or its TTL runs out.
@@ -301,10 +330,26 @@ class Icinga2Push:
                     batch = list(itertools.islice(queue.items(), PIPELINED_RESULTS))
                     attempted += self._push(batch, queue, deadline)
         except Icinga2Error as error:
+            if self._reloading(error, now):
+                # Icinga reloads to run the stage: what it did not answer stays queued, no failure of its.
+                self._retry.pause(now + TICK_SECONDS)
+                return False
             self._failed(error, now)
             return False
+        self._away_since = None
         self._retry.succeeded(f"Icinga 2 at {self._config.url} accepts results again")
         return True
+
+    def _reloading(self, error: Icinga2Error, now: float) -> bool:
+        """Whether `error` is Icinga's API away while it reloads to run a stage, for `RELOAD_SECONDS` at most.
+
+        Beyond that, or with no stage deployed, it is a failure (Icinga down, its certificate expired).
+        """
+        if not self._objects.stage_in_flight or error.reason not in RELOADING_REASONS:
+            return False
+        if self._away_since is None:
+            self._away_since = now
+        return now - self._away_since < RELOAD_SECONDS
 
     def _failed(self, error: Icinga2Error, now: float) -> None:
         self.stats.failed(error.reason)
