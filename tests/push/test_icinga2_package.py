@@ -349,11 +349,10 @@ def test_a_stage_icinga_rejects_changes_nothing_and_robots_are_registered_one_a_
 
 
 def test_registered_robots_results_go_on_while_a_stage_for_new_robots_is_deployed(
-    icinga: Icinga2, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    icinga: Icinga2, tmp_path: Path
 ) -> None:
     # At 10,000 robots Icinga validates and loads a stage for a minute or more: deployed by the push's own
     # thread, it held back every registered robot's results that long, past their TTL.
-    caplog.set_level(logging.INFO, logger="overseer.push")
     robots = [f"beside/robot{index}" for index in range(ROBOTS)]
     with exporter(tmp_path, icinga, "beside", PUSH_BULK_USER, robots) as running:
         assert running.model is not None and running.icinga2_push is not None
