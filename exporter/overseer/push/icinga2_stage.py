@@ -26,8 +26,8 @@ class StageInFlight:
     ) -> None:
         """Start `deploy` in a daemon thread; `staged` (host → services) are what it registers."""
         self.staged = staged
-        self.hosts = hosts  # new hosts among `staged`, and their services and new ones of packaged hosts
-        self.services = services
+        self.hosts = hosts  # how many of `staged`'s hosts are new
+        self.services = services  # how many services it adds, to new hosts and to those of the package
         self._error: Exception | None = None
         self._thread = threading.Thread(target=self._run, args=(deploy,), name="icinga2-stage", daemon=True)
         self._thread.start()
