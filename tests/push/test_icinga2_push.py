@@ -180,6 +180,26 @@ def test_results_sent_in_one_write_get_their_own_answers_in_order(icinga: Icinga
         client.close()
 
 
+@pytest.mark.servers
+def test_a_request_on_a_connection_broken_under_it_is_sent_again_on_a_new_one(
+    icinga: Icinga2, tmp_path: Path
+) -> None:
+    section = json.loads(push_config(tmp_path, icinga, "resent", "1h").read_text())["icinga2"]
+    client = Icinga2Client(icinga2_config(section))
+    try:
+        assert client.expect("GET", "/v1/objects/hosts", {"attrs": ["name"]})["results"] is not None
+        kept = client._connection
+        assert kept is not None and kept.sock is not None
+        # Gone as the old process's connections go when Icinga reloads to run a stage: writing the next
+        # request on it is a TLS error, not an answer missing.
+        socket.socket.shutdown(kept.sock, socket.SHUT_RDWR)
+        status, document = client.request("GET", "/v1/objects/hosts", {"attrs": ["name"]})
+        assert status == 200 and isinstance(document["results"], list)
+        assert client._connection is not None and client._connection is not kept
+    finally:
+        client.close()
+
+
 class RecordedTicks(threading.Event):
     """The push's stop event, recording how long each tick waits; set at the first wait of a whole tick."""
 

@@ -124,9 +124,7 @@ class Icinga2Client:
                     reader.release()
             except (http.client.HTTPException, OSError) as error:  # ssl.SSLError among them
                 failure = self._failure(error)
-                if attempt == 1 and not answers and kept_alive and not isinstance(error, TimeoutError):
-                    # Icinga closes a connection idle for 10 s: a batch finds it gone in more ways than one
-                    # request does (a TLS error while the batch is being written, under load).
+                if attempt == 1 and not answers and _stale(kept_alive, error):
                     continue
                 return answers, failure
             if response.will_close:
@@ -147,12 +145,13 @@ class Icinga2Client:
     ) -> tuple[int, bytes]:
         for attempt in (1, 2):  # a kept-alive connection the server closed fails once; retry on a new one
             connection = self._connect()
+            kept_alive = connection.sock is not None
             try:
                 connection.request(method, path, body=data, headers=headers)
                 response = connection.getresponse()
                 payload = response.read()
             except (http.client.HTTPException, OSError) as error:
-                if attempt == 1 and isinstance(error, (http.client.RemoteDisconnected, BrokenPipeError)):
+                if attempt == 1 and _stale(kept_alive, error):
                     self.close()
                     continue
                 # Raised unnamed: a local naming it would hold this frame's traceback, which holds the
@@ -190,6 +189,16 @@ class Icinga2Client:
                 config.host, config.port, self._context, config.tls_server_name or config.host, config.timeout
             )
         return self._connection
+
+
+def _stale(kept_alive: bool, error: Exception) -> bool:
+    """Whether `error` may be a kept-alive connection's end, met by a request: worth one try on a new one.
+
+    The server closed it (Icinga 2 closes an idle one; a reload ends the old process's), and a request
+    written on it meets that in more ways than one: no answer, a broken pipe, or a TLS error while being
+    written. A timeout is a server too slow, not a connection gone: sent again, it would wait as long.
+    """
+    return kept_alive and not isinstance(error, TimeoutError)
 
 
 class _SharedReader:
