@@ -6,6 +6,7 @@ so a fleet first heard is registered in stages; its results are pushed again eve
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -58,7 +59,8 @@ class Icinga2Receiving:
         )
         received = status["passive_host_checks_1min"] + status["passive_service_checks_1min"]
         due = objects * 60 / self.interval
-        failed = series_total(metrics, r'overseer_icinga2_pushes_total\{result="(?!ok")[a-z_0-9]+"\}')
+        failures = failed_requests(metrics)
+        failed = sum(failures.values())
         stages = series_total(metrics, r'overseer_icinga2_package_stages_total\{result="ok"\}')
         pending = series_total(metrics, "overseer_icinga2_pending_results")
         every = f"every {self.interval:g} s"
@@ -74,7 +76,14 @@ class Icinga2Receiving:
                 received >= RECEIVED_TARGET * due,
             ),
             Row("scale", f"Icinga 2 push {every}: results waiting in the exporter", pending, "results"),
-            Row("scale", f"Icinga 2 push {every}: requests failed", failed, "requests", "0", failed == 0),
+            Row(
+                "scale",
+                f"Icinga 2 push {every}: requests failed",
+                failed,
+                "requests" + "".join(f", {reason}: {count:g}" for reason, count in sorted(failures.items())),
+                "0",
+                failed == 0,
+            ),
             Row(
                 "scale",
                 f"Icinga 2 push {every}: config package stages (registering robots and their groups)",
@@ -83,6 +92,13 @@ class Icinga2Receiving:
             ),
             Row("scale", f"Icinga 2 push {every}: Icinga 2's CPU", cpu * 100, "% of a core"),
         ]
+
+
+def failed_requests(metrics: str) -> dict[str, float]:
+    """The push's failed requests in the exporter's `/metrics`, by reason (`timeout`, `connection`...)."""
+    pattern = r'^overseer_icinga2_pushes_total\{result="([a-z_0-9]+)"\} (\S+)$'
+    counts = re.findall(pattern, metrics, re.MULTILINE)
+    return {reason: float(count) for reason, count in counts if reason != "ok" and float(count)}
 
 
 HOST_STATES = ("up", "down", "unreachable", "pending")

@@ -11,6 +11,7 @@ import pytest
 from bench.bench_scale import STORES, run, shard_of
 from bench.common import Row
 from bench.loadgen_payloads import FleetShape
+from bench.scale_icinga2 import failed_requests
 from overseer.model.shard import Shard
 
 pytestmark = pytest.mark.servers
@@ -151,3 +152,16 @@ def test_the_fleet_pushed_to_a_real_icinga2_is_counted_as_icinga_received_it() -
     assert received.met and received.value >= 0.95, received
     assert row("requests failed").value == 0 and row("requests failed").met
     assert row("Icinga 2's CPU").value > 0
+
+
+def test_failed_pushes_are_told_by_reason_for_the_row_to_say_why() -> None:
+    metrics = "\n".join(
+        [
+            'overseer_icinga2_pushes_total{result="ok"} 4518.0',
+            'overseer_icinga2_pushes_total{result="tls"} 1.0',
+            'overseer_icinga2_pushes_total{result="http_500"} 2.0',
+            'overseer_icinga2_pushes_total{result="timeout"} 0.0',
+            'overseer_icinga2_package_stages_total{result="tls"} 7.0',
+        ]
+    )
+    assert failed_requests(metrics) == {"tls": 1.0, "http_500": 2.0}
