@@ -146,12 +146,14 @@ class Icinga2Client:
         for attempt in (1, 2):  # a kept-alive connection the server closed fails once; retry on a new one
             connection = self._connect()
             kept_alive = connection.sock is not None
+            response = None
             try:
                 connection.request(method, path, body=data, headers=headers)
                 response = connection.getresponse()
                 payload = response.read()
             except (http.client.HTTPException, OSError) as error:
-                if attempt == 1 and _stale(kept_alive, error):
+                # Once an answer began, Icinga did what was asked: it is not asked twice.
+                if attempt == 1 and response is None and _stale(kept_alive, error):
                     self.close()
                     continue
                 # Raised unnamed: a local naming it would hold this frame's traceback, which holds the
@@ -196,7 +198,8 @@ def _stale(kept_alive: bool, error: Exception) -> bool:
 
     The server closed it (Icinga 2 closes an idle one; a reload ends the old process's), and a request
     written on it meets that in more ways than one: no answer, a broken pipe, or a TLS error while being
-    written. A timeout is a server too slow, not a connection gone: sent again, it would wait as long.
+    written or awaiting its answer. A timeout is a server too slow, not a connection gone: sent again,
+    it would wait as long.
     """
     return kept_alive and not isinstance(error, TimeoutError)
 
