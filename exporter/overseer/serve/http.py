@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
 from overseer.fleet.interface import Fleet, FleetPartUnavailable
+from overseer.heap_trim import trim_after_answer
 from overseer.routes import MAX_BODY_BYTES, ApiRequest, JsonRoute
 from overseer.serve.api_query import ApiQueryError, parse_component_query, parse_robot_query
 from overseer.serve.assembler import Body, ExpositionAssembler
@@ -367,7 +368,11 @@ class _Handler(BaseHTTPRequestHandler):
             body = self.server.assembler.gzip_body(parts, fmt)
             self._send_body(200, body, fmt.content_type, head_only, encoding="gzip")
         else:
-            self._send_body(200, self.server.assembler.text_body(parts, fmt), fmt.content_type, head_only)
+            body = self.server.assembler.text_body(parts, fmt)
+            self._send_body(200, body, fmt.content_type, head_only)
+        length = body.length
+        del parts, body  # freed before the trim, which hands what they held back with the rest
+        trim_after_answer(length)
 
     def _json(self, status: int, document: dict[str, Any], head_only: bool) -> None:
         body = json.dumps(document, ensure_ascii=False, allow_nan=False).encode("utf-8")
