@@ -18,9 +18,9 @@ the exporter's process from 133-136 MB to 111-112 MB at 3,000 robots with two wo
 
 A scrape of 10,000 robots renders megabytes at a time; glibc's moving bound for mapping a block on its
 own soon takes such blocks from the heap instead, where they stay once freed (`map_large_blocks`).
-The smaller blocks an answer is built from (the workers' parts, read and joined) stay too, 35-40 MB in
-the exporter's process at 10,000 robots until the minute's trim: a large answer, once written, is
-followed by a trim of its own (`trim_after_answer`).
+A scrape left 35-40 MB more resident in the exporter's process at 10,000 robots until the minute's
+trim, none of it live (freed blocks, most likely those its answer was built from: the workers' parts):
+a large answer, once written, is followed by a trim of its own (`trim_after_answer`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 TRIM_INTERVAL_SECONDS = 60.0
 # Items once waiting together (samples, ~80 MB of them; events) after which their heap is handed back.
 TRIM_AFTER_BACKLOG = 20_000
-# A `/metrics` answer this large (its gzip: a fleet of about 1,000 robots) is followed by a trim.
+# A `/metrics` answer this large is followed by a trim (gzip: roughly 500 to 2,500 robots, as values go).
 TRIM_AFTER_ANSWER_BYTES = 1 << 20
 HEAP_ARENAS = 2
 MMAP_THRESHOLD_BYTES = 1 << 20
