@@ -7,7 +7,7 @@ import logging
 import sys
 
 from overseer.commands import Command
-from overseer.commands.signals import wait_for_signal
+from overseer.commands.signals import StopSignals
 from overseer.config import ConfigError, load_config
 from overseer.config.loading import ALL_OPTIONS
 from overseer.config.options import add_flags, naming_the_flag, overrides
@@ -46,12 +46,13 @@ def run(args: argparse.Namespace) -> int:
             f"overseer run: cannot listen on {config.web.listen_address}: {error.strerror}", file=sys.stderr
         )
         return 1
+    signals = StopSignals(exporter.reload)  # before its parts start: a stop meanwhile waits for them
     try:
         exporter.start()
     except WorkerStartError as error:
         print(f"overseer run: {error}", file=sys.stderr)
         return 1
-    wait_for_signal(exporter.reload)
+    signals.wait()
     if not exporter.stop():
         return 1
     log.info("stopped")
