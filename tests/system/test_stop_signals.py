@@ -7,8 +7,15 @@ waits for it: with the default action still in place, it ended the process with 
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
+
+from testbed.ports import free_port
+from testbed.processes import RunningProcess, overseer_command, spawn, wait_for
 
 _STOPPED_WHILE_STARTING = """
 import os, signal, sys, time
@@ -52,3 +59,22 @@ def test_a_second_stop_while_stopping_leaves_at_once() -> None:
     done = run_script(_SECOND_STOP)
     assert done.returncode == 128 + 15, done.stderr
     assert done.stdout.split() == ["stopping"]
+
+
+@pytest.mark.servers
+@pytest.mark.parametrize("command", ["run", "demo"])
+def test_a_stop_sent_while_the_command_starts_its_parts_ends_it_cleanly(
+    command: str, tmp_path: Path, dds_domain: int
+) -> None:
+    """The stop comes as the event history opens, before the workers, the server and the sources start."""
+    log_path = tmp_path / f"{command}.log"
+    domain = f"--dds.domain={dds_domain}" if command == "run" else f"--domain={dds_domain}"
+    args = [*overseer_command(), command, f"--web.listen-address=127.0.0.1:{free_port()}", domain]
+    process = RunningProcess(spawn(args, log_path), log_path)
+    try:
+        wait_for(lambda: "recording fleet events" in process.log(), 30, interval=0.01, message="starting")
+        process.process.send_signal(signal.SIGTERM)
+        assert process.process.wait(30) == 0, process.log()
+        assert "INFO overseer: stopping" in process.log()
+    finally:
+        process.stop()

@@ -8,7 +8,7 @@ import threading
 import time
 
 from overseer.commands import Command
-from overseer.commands.signals import wait_for_signal
+from overseer.commands.signals import StopSignals
 from overseer.config import load_config
 from overseer.config.web import DEFAULT_PORT
 from overseer.garbage_collection import collect_in_large_batches
@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from overseer.simulator.publisher import FleetSimulator, SimulatorSettings, parse_event
 
     exporter = Exporter(config)
+    signals = StopSignals()  # before its parts start: a stop meanwhile waits for them
     exporter.start()
     robots = {f"robot{index}" for index in range(1, args.robots + 1)}
     settings = SimulatorSettings(
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     started = time.monotonic()
-    wait_for_signal()
+    signals.wait()
     simulator.stop()
     thread.join(timeout=5)
     exporter.stop()

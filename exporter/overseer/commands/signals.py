@@ -50,8 +50,3 @@ def _again(signum: int, _frame: object) -> None:
     log.warning("%s again while stopping: leaving at once", signal.Signals(signum).name)
     logging.shutdown()
     os._exit(128 + signum)
-
-
-def wait_for_signal(on_hangup: Callable[[], object] | None = None) -> None:
-    """Return at SIGTERM or SIGINT; from then on a second one ends the process at once (`StopSignals`)."""
-    StopSignals(on_hangup).wait()
