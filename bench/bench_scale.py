@@ -91,6 +91,7 @@ from bench.loadgen import (
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.scale_icinga2 import icinga2_receiving
+from bench.worker_cpu import STEADY_CPU_A_MESSAGE, ProcessesCpu, divided_rows
 from bench.zenoh_counter import CounterProcess, running_counter
 from overseer.config.ingest import MAX_INGEST_WORKERS
 from overseer.model.shard import Shard
@@ -628,10 +629,12 @@ def run(
                 # Steady: from the window's middle (the first look long over) to the check's runs.
                 time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
                 steady_from, steady_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
+                steady_split = ProcessesCpu(pids)
                 pushing_from = icinga2.mark() if icinga2 else None
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
                 steady_rss = highest_tree_resident(pids, steady_until)
                 steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
+                steady_split.stop()
                 checked = shard_of(exporters, CHECKED_ROBOT).url
                 checks = check_rows(checked, CHECKED_ROBOT)  # the last seconds of the window
                 if icinga2 and pushing_from:  # while the fleet publishes: once it stops every robot changes
@@ -730,12 +733,8 @@ def run(
         ),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
-        Row(
-            "scale",
-            f"{label}: exporter CPU a message, steady (the window's second half)",
-            steady_cpu / (robots * rate) * 1e6,
-            "µs",
-        ),
+        Row("scale", f"{label}: {STEADY_CPU_A_MESSAGE}", steady_cpu / (robots * rate) * 1e6, "µs"),
+        *steady_split.rows(label, robots * rate),
         Row(
             "scale",
             f"{label}: exporter memory a component (resident, all its processes)",
@@ -925,8 +924,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         parser.error(str(error))
     rows: list[Row] = []
     for robots in sizes:
+        by_workers: dict[int, list[Row]] = {}
         for workers in worker_counts:
-            rows += run(
+            by_workers[workers] = run(
                 shape_of(options, robots),
                 workers,
                 options.seconds,
@@ -944,6 +944,9 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.prometheus_agent,
                 options.icinga2,
             )
+            rows += by_workers[workers]
+        fleet = f"{fleet_label(shape_of(options, robots), options.rate)}, {options.transport}"
+        rows += divided_rows(fleet, by_workers)
     emit(rows)
 
 
