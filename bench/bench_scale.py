@@ -91,7 +91,7 @@ from bench.loadgen import (
 from bench.loadgen_payloads import REALISTIC, FleetShape
 from bench.loadgen_wire import DDS, TRANSPORTS, ZENOH
 from bench.scale_icinga2 import icinga2_receiving
-from bench.worker_cpu import STEADY_CPU_A_MESSAGE, ProcessesCpu, divided_rows
+from bench.worker_cpu import STEADY_CPU_A_MESSAGE, ProcessesCpu, compared_with_one_worker
 from bench.zenoh_counter import CounterProcess, running_counter
 from overseer.config.ingest import MAX_INGEST_WORKERS
 from overseer.model.shard import Shard
@@ -532,6 +532,14 @@ def shipped_rules_rows(
     ]
 
 
+def setup_label(shards: int, store: str | None, head_start: float, exporter_options: Sequence[str]) -> str:
+    """What a row's name says after the worker count: shards, the agent's store, a head start, options."""
+    label = f" in each of {shards} shards" if shards > 1 else ""
+    label += f", Prometheus in agent mode into {store}" if store else ""
+    label += f", declared {head_start:g} s before publishing" if head_start else ""
+    return label + "".join(f", {option}" for option in exporter_options)
+
+
 def fleet_label(shape: FleetShape, rate: float) -> str:
     """The fleet in a row's name: its size and rate, its profile, and what differs from the defaults."""
     label = f"{shape.robots} robots x {shape.components}"
@@ -579,11 +587,8 @@ def run(
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
-    label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}"
-    label += f" in each of {shards} shards" if shards > 1 else ""
-    label += f", Prometheus in agent mode into {store}" if store else ""
-    label += f", declared {head_start:g} s before publishing" if head_start else ""
-    label += "".join(f", {option}" for option in exporter_options)
+    setup = setup_label(shards, store, head_start, exporter_options)
+    label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}{setup}"
     phases = 1 + rules  # the floor's, then the rules'
     publishing = seconds + (
         phases * (prometheus_seconds + 2 * interval) + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0
@@ -628,13 +633,11 @@ def run(
             with wires.probe(shard_of(exporters, PROBE_ROBOT).url, shape.components) as probe:
                 # Steady: from the window's middle (the first look long over) to the check's runs.
                 time.sleep(max(0.0, started + seconds / 2 - time.monotonic()))
-                steady_from, steady_cpu = time.monotonic(), forest(tree_cpu_seconds, pids)
-                steady_split = ProcessesCpu(pids)
+                steady_from, steady_processes = time.monotonic(), ProcessesCpu(pids)
                 pushing_from = icinga2.mark() if icinga2 else None
                 steady_until = max(started + seconds - CHECK_SECONDS, steady_from + 1.0)
                 steady_rss = highest_tree_resident(pids, steady_until)
-                steady_cpu = (forest(tree_cpu_seconds, pids) - steady_cpu) / (time.monotonic() - steady_from)
-                steady_split.stop()
+                steady = steady_processes.stop()
                 checked = shard_of(exporters, CHECKED_ROBOT).url
                 checks = check_rows(checked, CHECKED_ROBOT)  # the last seconds of the window
                 if icinga2 and pushing_from:  # while the fleet publishes: once it stops every robot changes
@@ -733,8 +736,13 @@ def run(
         ),
         Row("scale", f"{label}: exporter CPU", cpu / elapsed * 100, "% of a core", "<= 100", cpu <= elapsed),
         Row("scale", f"{label}: exporter CPU a message", cpu / max(got, 1) * 1e6, "µs"),
-        Row("scale", f"{label}: {STEADY_CPU_A_MESSAGE}", steady_cpu / (robots * rate) * 1e6, "µs"),
-        *steady_split.rows(label, robots * rate),
+        Row(
+            "scale",
+            f"{label}: {STEADY_CPU_A_MESSAGE}",
+            steady.whole / steady.seconds / (robots * rate) * 1e6,
+            "µs",
+        ),
+        *steady.rows(label, robots * rate),
         Row(
             "scale",
             f"{label}: exporter memory a component (resident, all its processes)",
@@ -924,9 +932,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         parser.error(str(error))
     rows: list[Row] = []
     for robots in sizes:
-        by_workers: dict[int, list[Row]] = {}
+        runs: list[tuple[int, list[Row]]] = []
         for workers in worker_counts:
-            by_workers[workers] = run(
+            measured = run(
                 shape_of(options, robots),
                 workers,
                 options.seconds,
@@ -944,9 +952,12 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.prometheus_agent,
                 options.icinga2,
             )
-            rows += by_workers[workers]
-        fleet = f"{fleet_label(shape_of(options, robots), options.rate)}, {options.transport}"
-        rows += divided_rows(fleet, by_workers)
+            runs.append((workers, measured))
+            rows += measured
+        if options.shards == 1:  # with shards, a worker's share would be of its shard's, not the fleet's
+            fleet = f"{fleet_label(shape_of(options, robots), options.rate)}, {options.transport}"
+            setup = setup_label(1, options.prometheus_agent, options.head_start, options.exporter_option)
+            rows += compared_with_one_worker(fleet, setup, runs)
     emit(rows)
 
 

@@ -16,7 +16,6 @@ from bench.worker_cpu import (
     BUSIEST_WORKER_A_MESSAGE,
     OWN_PROCESS_A_MESSAGE,
     STEADY_CPU_A_MESSAGE,
-    divided_rows,
 )
 from overseer.model.shard import Shard
 
@@ -46,9 +45,9 @@ def test_a_small_fleet_at_two_hertz_is_published_measured_and_labelled_as_asked(
     assert row("lost by a subscriber that only counts (same router, same run)").value == 0
     assert row("lost beyond it").value == 0 and row("lost beyond it").met
     assert row("exporter CPU a message").value > 0
-    # one worker ingests in the exporter's own process: it is all of it, and no worker is told apart
-    assert 0 < row(OWN_PROCESS_A_MESSAGE).value
-    assert f"{label}: {BUSIEST_WORKER_A_MESSAGE}" not in rows
+    # one worker ingests in the exporter's own process: no part of it is told apart
+    assert row(STEADY_CPU_A_MESSAGE).value >= 0
+    assert not any(OWN_PROCESS_A_MESSAGE in figure or BUSIEST_WORKER_A_MESSAGE in figure for figure in rows)
     memory = row("exporter memory a component (resident, all its processes)")
     assert memory.unit == "bytes" and memory.value > 0 and memory.target == "<= 1000"
     # shared pages (the interpreter, the libraries) counted once: less than each process counting them
@@ -83,10 +82,9 @@ def test_the_status_page_and_the_api_are_timed_while_the_fleet_goes_on_publishin
     assert 0 < robots.value < 10_000 and robots.unit == "ms"
     assert 0 < row("GET /api/v1/events?limit=100 (the newest events)").value < 10_000
     assert row("lost updates").value == 0  # the generator was stopped, not cut off, after the page
-    # two workers: the exporter's own process and the busier of them, each a part of the whole
-    steady = row(STEADY_CPU_A_MESSAGE).value
-    assert 0 < row(OWN_PROCESS_A_MESSAGE).value < steady
-    assert 0 < row(BUSIEST_WORKER_A_MESSAGE).value < steady
+    # two workers: the exporter's own process and the busier of them, parts of the whole (same readings)
+    own, busiest = row(OWN_PROCESS_A_MESSAGE).value, row(BUSIEST_WORKER_A_MESSAGE).value
+    assert own >= 0 and busiest >= 0 and own + busiest <= row(STEADY_CPU_A_MESSAGE).value + 1e-9
 
 
 def test_a_tiny_fleet_on_four_workers_is_heard_whole_with_its_probe_robot() -> None:
@@ -178,26 +176,3 @@ def test_failed_pushes_are_told_by_reason_for_the_row_to_say_why() -> None:
         ]
     )
     assert failed_requests(metrics) == {"tls": 1.0, "http_500": 2.0}
-
-
-def test_each_worker_count_is_compared_with_one_worker_measured_in_the_same_run() -> None:
-    def measured(label: str, steady: float, busiest: float | None) -> list[Row]:
-        rows = [Row("scale", f"{label}: {STEADY_CPU_A_MESSAGE}", steady, "µs")]
-        if busiest is not None:
-            rows.append(Row("scale", f"{label}: {BUSIEST_WORKER_A_MESSAGE}", busiest, "µs"))
-        return rows
-
-    by_workers = {
-        1: measured("f, 1 worker", 80.0, None),
-        4: measured("f, 4 workers", 96.0, 22.0),
-        2: measured("f, 2 workers", 88.0, 40.0),
-    }
-    rows = {row.figure: row.value for row in divided_rows("f", by_workers)}
-    assert rows == {
-        "f, 2 workers ÷ 1 worker, same run: exporter CPU a message, steady (multiplied: 2)": 1.1,
-        "f, 2 workers ÷ 1 worker, same run: the busiest worker's (divided: 0.50)": 0.5,
-        "f, 4 workers ÷ 1 worker, same run: exporter CPU a message, steady (multiplied: 4)": 1.2,
-        "f, 4 workers ÷ 1 worker, same run: the busiest worker's (divided: 0.25)": 0.275,
-    }
-    assert divided_rows("f", {2: by_workers[2], 4: by_workers[4]}) == []  # nothing to compare with
-    assert len(divided_rows("f", {1: by_workers[1], 2: by_workers[1]})) == 0  # a run with no worker told
