@@ -21,9 +21,13 @@ tokens as the exporter is) hears the same fleet through the same router: what it
 never delivered to anyone (a second subscriber of the tokens adds to the router's work as a fleet
 starts).
 Lost updates = messages the generator published minus messages the exporter counted as received (the
-probe's taken out); CPU is the exporter's processes' (main and workers) over the window; the
-generator's own CPU per 1,000 robots is printed beside every figure. `--transport dds` publishes raw
-DDS writes on a fresh loopback domain instead, with no router and no probe (it publishes as rmw_zenoh).
+probe's taken out); CPU is the exporter's processes' (main and workers) over the window; with
+workers, the steady window's CPU is also told apart: the exporter's own process and the busiest worker
+(`bench/worker_cpu.py`), and each run of several workers is divided by the nearest run of one worker in
+the same invocation (`--workers 1,2,4`: about 1 and 1/N if the workers divide the ingest, N and 1 if
+each did all of it). The generator's own CPU per 1,000 robots is printed beside every figure.
+`--transport dds` publishes raw DDS writes on a fresh loopback domain instead, with no router and no
+probe (it publishes as rmw_zenoh).
 
 With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
 the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
