@@ -24,8 +24,9 @@ Lost updates = messages the generator published minus messages the exporter coun
 probe's taken out); CPU is the exporter's processes' (main and workers) over the window; with
 workers, the steady window's CPU is also told apart: the exporter's own process and the busiest worker
 (`bench/worker_cpu.py`), and each run of several workers is divided by the nearest run of one worker in
-the same invocation (`--workers 1,2,4`: about 1 and 1/N if the workers divide the ingest, N and 1 if
-each did all of it). The generator's own CPU per 1,000 robots is printed beside every figure.
+the same invocation (`--workers 1,2,4`, one shard): the whole about 1 time one worker's and the busiest
+worker at most 1/N of it if the workers divide the ingest, the whole about N times and the busiest about
+once if each did all of it. The generator's own CPU per 1,000 robots is printed beside every figure.
 `--transport dds` publishes raw DDS writes on a fresh loopback domain instead, with no router and no
 probe (it publishes as rmw_zenoh).
 

@@ -79,19 +79,19 @@ def test_each_worker_count_is_compared_with_the_nearest_run_of_one_worker() -> N
     assert rows == {
         "f, 2 workers ÷ 1 worker, h, same invocation: exporter CPU a message, steady": (
             1.1,
-            "~ 1 (2 if multiplied)",
+            "~ 1 divided, ~ 2 multiplied",
         ),
         "f, 2 workers ÷ 1 worker, h, same invocation: the busiest worker's": (
             0.5,
-            "~ 0.50 (1 if multiplied)",
+            "<= 0.50 divided, ~ 1 multiplied",
         ),
         "f, 4 workers ÷ 1 worker, h, same invocation: exporter CPU a message, steady": (
             1.2,
-            "~ 1 (4 if multiplied)",
+            "~ 1 divided, ~ 4 multiplied",
         ),
         "f, 4 workers ÷ 1 worker, h, same invocation: the busiest worker's": (
             0.275,
-            "~ 0.25 (1 if multiplied)",
+            "<= 0.25 divided, ~ 1 multiplied",
         ),
     }
 
@@ -101,3 +101,15 @@ def test_nothing_is_compared_without_a_run_of_one_worker_or_a_figure_to_compare(
     assert compared_with_one_worker("f", "", [two]) == []
     assert compared_with_one_worker("f", "", [(1, measured("f, 1 worker", 0.0, None)), two]) == []
     assert compared_with_one_worker("f", "", [(1, measured("f, 1 worker", 80.0, None)), (2, [])]) == []
+    restarted = [*two[1], Row("scale", f"f, 2 workers: {WORKERS_LEFT_OUT}", 2, "processes")]
+    assert compared_with_one_worker("f", "", [(1, measured("f, 1 worker", 80.0, None)), (2, restarted)]) == []
+
+
+def test_a_worker_that_ended_in_the_window_is_neither_told_apart_nor_in_the_whole(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    read_processes(monkeypatch, {100: [100, 101, 102]}, {100: 1.0, 101: 1.0, 102: 1.0})
+    processes = ProcessesCpu(EXPORTERS[:1])
+    read_processes(monkeypatch, {100: [100, 101]}, {100: 1.5, 101: 2.0})
+    split = processes.stop()
+    assert (split.whole, split.own, split.workers, split.left_out) == (1.5, 0.5, (1.0,), 1)

@@ -85,7 +85,7 @@ def stopped_while_starting(args: list[str], log_path: Path) -> bool:
     process = RunningProcess(spawn(args, log_path), log_path)
     try:
         wait_for(lambda: "recording fleet events" in process.log(), 30, interval=0.01, message="starting")
-        started = "serving on" in process.log()
+        started = "serving on" in process.log()  # it may still finish before the stop lands: rarely
         process.process.send_signal(signal.SIGTERM)
         assert process.process.wait(30) == 0, process.log()
         assert "INFO overseer: stopping" in process.log()
