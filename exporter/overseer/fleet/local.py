@@ -9,7 +9,6 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Collection
-from multiprocessing.connection import Connection
 from typing import Any
 
 from prometheus_client.registry import Collector
@@ -33,6 +32,7 @@ from overseer.model.robot_cap import RobotCap
 from overseer.model.shard import Shard
 from overseer.model.transitions import TransitionDetector
 from overseer.sources import Source, build_sources
+from overseer.sources.zenoh.relay_items import RelayedFeed
 
 log = logging.getLogger(__name__)
 
@@ -71,14 +71,14 @@ class LocalFleet:
         config: Config,
         events: EventSink | None = None,
         start: FleetStart | None = None,
-        zenoh_relayed: Connection | None = None,
+        zenoh_relayed: RelayedFeed | None = None,
         robot_cap: RobotCap | None = None,
     ) -> LocalFleet:
         """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
 
         `events`, when given, receives the model's transitions (level changes as they are applied, and
         what time decides, checked every second); `start` says what it follows before it hears anything;
-        `zenoh_relayed` is an ingest worker's pipe from the exporter's Zenoh relay, and `robot_cap` its
+        `zenoh_relayed` is what an ingest worker reads from the exporter's Zenoh relay, and `robot_cap` its
         count of robots against the whole fleet's cap.
         """
         model = FleetModel(config.fleet, robot_cap=robot_cap)

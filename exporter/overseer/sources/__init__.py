@@ -6,10 +6,9 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
-    from multiprocessing.connection import Connection
-
     from overseer.config import Config
     from overseer.model import FleetModel
+    from overseer.sources.zenoh.relay_items import RelayedFeed
 
 
 class Source(Protocol):
@@ -35,10 +34,12 @@ def enabled_transports(config: Config) -> list[str]:
     return [name for name, on in enabled if on]
 
 
-def build_sources(config: Config, model: FleetModel, zenoh_relayed: Connection | None = None) -> list[Source]:
+def build_sources(
+    config: Config, model: FleetModel, zenoh_relayed: RelayedFeed | None = None
+) -> list[Source]:
     """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started.
 
-    `zenoh_relayed`: an ingest worker's pipe from the exporter's Zenoh relay, read instead of a session.
+    `zenoh_relayed`: what an ingest worker reads from the exporter's Zenoh relay, instead of a session.
     """
     sources: list[Source] = []
     if config.dds.enabled:

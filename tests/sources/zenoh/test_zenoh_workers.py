@@ -26,7 +26,9 @@ from overseer.sources.zenoh import outbox as outbox_module
 from overseer.sources.zenoh import relay as relay_module
 from overseer.sources.zenoh.keys import DIAGNOSTIC_ARRAY_HASH, data_key, publisher_gid, publisher_token
 from overseer.sources.zenoh.relay import ZenohRelay
+from overseer.sources.zenoh.relay_items import RelayedFeed
 from overseer.sources.zenoh.relayed import RelayedZenohSource
+from overseer.sources.zenoh.shared_ring import SharedRing
 from testbed.processes import running_simulator, wait_for
 from testbed.zenoh import endpoint, running_router, simulator_args
 
@@ -34,6 +36,13 @@ ROBOTS = 8
 WORKERS = 2
 QUEUE_LENGTH = 300  # samples that may wait for a worker, in the test of one that falls behind
 FIRST, SECOND = "robot_a", "robot_d"  # of two workers, the first's robot and the second's
+
+
+def relay_feeds(ring: bool = True) -> tuple[RelayedFeed, RelayedFeed]:
+    """A worker's end and the relay's of a new pipe, with a ring of shared memory (as a pool makes them)."""
+    reader, writer = multiprocessing.Pipe(duplex=False)
+    shared = SharedRing.create() if ring else None
+    return RelayedFeed(reader, shared), RelayedFeed(writer, shared)
 
 
 def worker_shards() -> list[Shard]:
@@ -46,7 +55,7 @@ def relayed_workers(relay: ZenohRelay, config: ZenohConfig) -> Iterator[list[Rel
     """Two relayed sources attached to `relay`, each with a model of its own, reading until the block ends."""
     sources = []
     for worker, shard in enumerate(worker_shards()):
-        reader, writer = multiprocessing.Pipe(duplex=False)
+        reader, writer = relay_feeds()
         sources.append(RelayedZenohSource(config, FleetModel(), shard, reader))
         relay.attach(worker, writer)
     for source in sources:
@@ -127,7 +136,7 @@ def test_un_namespaced_samples_go_to_their_robots_worker_and_a_worker_started_ag
         wait_for(lambda: [components(worker) for worker in workers] == expected, 5, message="each its own")
         assert [worker.samples_heard for worker in workers] == [2, 2]  # the held one, then its own
         # The second worker starts again: the relay tells it the tokens alive before any sample.
-        reader, writer = multiprocessing.Pipe(duplex=False)
+        reader, writer = relay_feeds()
         restarted = RelayedZenohSource(config, FleetModel(), worker_shards()[1], reader)
         relay.attach(1, writer)
         restarted.start()
@@ -146,7 +155,7 @@ def test_samples_beyond_what_may_wait_for_a_worker_are_dropped_and_counted_not_l
     key, gid = data_key(0, FIRST, AGGREGATED), publisher_gid(token)
     status = DiagnosticStatus(0, "/burst", "ok", "", tuple((f"key{i}", "x" * 90) for i in range(50)))
     payload = encode_diagnostic_array(DiagnosticArray(0, 0, "", (status,)))  # 5 kB: the pipe fills
-    reader, writer = multiprocessing.Pipe(duplex=False)
+    reader, writer = relay_feeds()
     relay.attach(0, writer)
     sent = 10 * QUEUE_LENGTH
     for number in range(1, sent + 1):  # nothing reads the pipe yet: a worker far behind
@@ -176,7 +185,7 @@ def test_a_flood_of_tokens_to_a_worker_that_is_stuck_is_bounded(monkeypatch: pyt
     monkeypatch.setattr(relay_module, "MAX_LIVE_TOKENS", 10)
     monkeypatch.setattr(outbox_module, "MAX_TOKENS", 10)
     relay = ZenohRelay(ZenohConfig(enabled=True, queue_length=5), Shard(), 1)
-    _, writer = multiprocessing.Pipe(duplex=False)  # nothing ever reads it: a worker that is stuck
+    _, writer = relay_feeds(ring=False)  # nothing ever reads it: a worker that is stuck
     relay.attach(0, writer)
     for entity in range(1000):  # tokens come and go faster than anyone could follow
         relay.on_token(updater_token(f"robot{entity}", entity), alive=entity % 2 == 0)

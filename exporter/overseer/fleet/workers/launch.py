@@ -1,11 +1,11 @@
 """A worker's process, started without `multiprocessing`'s machinery: the exporter's interpreter, run afresh.
 
 `multiprocessing`'s `spawn` also starts a resource tracker, an interpreter of its own (13 MB resident)
-that outlives nothing the workers hold: they share only pipes and `SharedCounts`, which need no cleanup
-by a third process. So a worker is a plain child process: its function and arguments are pickled down
-a pipe of their own, and the pipes (`Connection`) and `SharedCounts` among them are passed as open file
-descriptors under the same numbers. The child imports what the exporter imported, from the same path,
-with the same interpreter options.
+that outlives nothing the workers hold: they share only pipes and memory files (`SharedCounts`,
+`SharedRing`), which need no cleanup by a third process. So a worker is a plain child process: its
+function and arguments are pickled down a pipe of their own, and the pipes (`Connection`) and memory
+files among them are passed as open file descriptors under the same numbers. The child imports what
+the exporter imported, from the same path, with the same interpreter options.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from multiprocessing.connection import Connection
 from typing import IO, Any
 
 from overseer.fleet.workers.shared_counts import SharedCounts
+from overseer.sources.zenoh.shared_ring import SharedRing
 
 CHILD_MARKER = __name__  # in every child's command line, to find them by
 # The child reads the exporter's import path, then the function and its arguments, from descriptor {}.
@@ -61,8 +62,9 @@ class ChildProcess:
 def start_child(target: Callable[..., Any], args: Sequence[Any]) -> ChildProcess:
     """Run `target(*args)` in a new interpreter; `target` must be importable by its module's name.
 
-    Every `Connection` and `SharedCounts` in `args` is the same pipe or memory in the child. Close the
-    parent's copies of the child's pipe ends once this returns, so that either side sees the other leave.
+    Every `Connection`, `SharedCounts` and `SharedRing` in `args` is the same pipe or memory in the
+    child. Close the parent's copies of the child's pipe ends once this returns, so that either side
+    sees the other leave.
     The arguments are written to the child as it reads them, from a thread of their own: a child that
     never starts never answers either, which whoever waits for its answer times out on.
     """
@@ -127,4 +129,7 @@ class _ArgumentPickler(pickle.Pickler):
         if isinstance(obj, SharedCounts):
             self.descriptors.append(obj.fileno())
             return SharedCounts, (obj.fileno(), len(obj))
+        if isinstance(obj, SharedRing):
+            self.descriptors.append(obj.fileno())
+            return SharedRing, (obj.fileno(), obj.size)
         return NotImplemented

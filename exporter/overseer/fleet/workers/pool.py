@@ -21,6 +21,8 @@ from overseer.fleet.workers.process import FAILED, READY, run_worker
 from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.model.events import PackedRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
+from overseer.sources.zenoh.relay_items import RelayedFeed
+from overseer.sources.zenoh.shared_ring import SharedRing
 
 log = logging.getLogger(__name__)
 
@@ -205,11 +207,13 @@ class WorkerPool:
 
     def _spawn(self, index: int) -> _Handle:
         made: list[Connection] = []  # every pipe end made, closed again if the worker cannot be started
+        ring: SharedRing | None = None  # the relayed samples' payloads, with the relay's pipe
         try:
             requests, child_requests = _pipe(made)
             events, child_events = _pipe(made, duplex=False)
             # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
             relayed, relay_writer = _pipe(made, duplex=False) if self._relay else (None, None)
+            ring = SharedRing.create() if self._relay else None
             arguments = (
                 self.config,
                 index,
@@ -217,19 +221,23 @@ class WorkerPool:
                 child_requests,
                 child_events,
                 self._start(),
-                relayed,
+                None if relayed is None else RelayedFeed(relayed, ring),
                 self._robot_counts,
             )
             process = start_child(run_worker, arguments)
         except (OSError, RuntimeError) as error:  # out of memory, descriptors or threads
             for end in made:
                 end.close()
+            if ring is not None:
+                ring.close()
             raise WorkerStartError(f"ingest worker {index} could not be started: {error}") from error
         child_requests.close()
         child_events.close()
         if self._relay is not None and relayed is not None and relay_writer is not None:
             relayed.close()
-            self._relay.attach(index, relay_writer)
+            if ring is not None:
+                ring.close()  # its memory stays mapped, here and in the worker
+            self._relay.attach(index, RelayedFeed(relay_writer, ring))
         handle = _Handle(index, self.restarts[index], process, requests, events)
         self._handles[index] = handle
         threading.Thread(

@@ -26,6 +26,7 @@ from overseer.heap_trim import shape_heap, trim_heap_every
 from overseer.log_format import configure_logging
 from overseer.model.events import Event, event_rows, pack_rows
 from overseer.model.robot_cap import SharedRobotCap
+from overseer.sources.zenoh.relay_items import RelayedFeed
 
 log = logging.getLogger(__name__)
 
@@ -81,13 +82,13 @@ def run_worker(
     requests: Connection,
     events: Connection,
     start: FleetStart | None = None,
-    zenoh_relayed: Connection | None = None,
+    zenoh_relayed: RelayedFeed | None = None,
     robot_counts: SharedCounts | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
     `start` is what it follows before it hears anything (its share of it: the robots it owns);
-    `zenoh_relayed` the pipe its Zenoh robots' samples come down from the exporter's session;
+    `zenoh_relayed` the pipe (and ring) its Zenoh robots' samples come down from the exporter's session;
     `robot_counts` every worker's robots, one slot each, against `fleet.max_robots`. Once its
     fleet has stopped, the process ends at once, without the interpreter's shutdown: that shutdown can
     hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
@@ -113,7 +114,7 @@ def _serve(
     requests: Connection,
     events: Connection,
     start: FleetStart | None,
-    zenoh_relayed: Connection | None,
+    zenoh_relayed: RelayedFeed | None,
     robot_counts: SharedCounts | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""

@@ -6,7 +6,7 @@ or subscribes to each of its robots' topics (a declaration costs the session and
 more there are: about 1 ms each at 4,000, so seconds of CPU as a large fleet is first heard). The
 exporter's process holds the one session instead, with the wildcard subscriptions of one worker, and
 hands each sample to the worker that owns its robot through a pipe, in batches (`outbox.py`,
-`relay_items.py`):
+`relay_items.py`), the payloads through a ring of memory both processes map (`shared_ring.py`):
 the key tells the robot of a namespaced topic, the publisher's GID, from its liveliness token, that of
 the un-namespaced `/diagnostics`. Every worker gets every token, and a worker started again gets the
 tokens alive then, before any sample. Samples whose robot is not known yet go to every worker, which
@@ -29,7 +29,7 @@ from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.keys import RejectedKey, attachment_gid, parse_data_key
 from overseer.sources.zenoh.outbox import Deliver, Outbox
 from overseer.sources.zenoh.receiver import ZenohReceiver
-from overseer.sources.zenoh.relay_items import ERROR, SAMPLE, TOKEN, Item, encode_batch
+from overseer.sources.zenoh.relay_items import ERROR, SAMPLE, TOKEN, Item, RelayedFeed, encode_batch
 from overseer.sources.zenoh.tokens import token_subject
 
 log = logging.getLogger(__name__)
@@ -63,9 +63,10 @@ class ZenohRelay:
         self._lock = threading.Lock()
         self.receiver = ZenohReceiver(config, self.on_sample, self.on_token, self._unreachable, lambda: None)
 
-    def attach(self, worker: int, connection: Connection) -> None:
-        """Worker `worker`, started or started again, reads its batches from `connection` from now on."""
-        outbox = Outbox(self._config.queue_length, _sender(connection), f"zenoh-relay-{worker}")
+    def attach(self, worker: int, feed: RelayedFeed) -> None:
+        """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
+        connection = feed.connection
+        outbox = Outbox(self._config.queue_length, _sender(feed), f"zenoh-relay-{worker}")
         outbox.start()
         with self._lock:
             for key in self._live:
@@ -150,12 +151,13 @@ class ZenohRelay:
             outbox.put((ERROR, "router_unreachable"))
 
 
-def _sender(connection: Connection) -> Deliver:
+def _sender(feed: RelayedFeed) -> Deliver:
     """Sends a batch down a worker's pipe; False once the worker is gone (the pool starts it again)."""
+    connection, ring = feed.connection, feed.ring
 
     def send(batch: list[Item]) -> bool:
         try:
-            connection.send_bytes(encode_batch(batch))
+            connection.send_bytes(encode_batch(batch, ring))
         except (OSError, ValueError):
             log.debug("an ingest worker's pipe closed while samples were relayed to it")
             return False

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import threading
-from multiprocessing.connection import Connection
 
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.zenoh import ZenohConfig
@@ -17,13 +16,13 @@ from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.ingest import TICK_SECONDS, TRANSPORT, ZenohIngest
-from overseer.sources.zenoh.relay_items import decode_batch
+from overseer.sources.zenoh.relay_items import RelayedFeed, decode_batch
 
 log = logging.getLogger(__name__)
 
 
 class RelayedZenohSource:
-    """Feeds a worker's model from what the exporter's Zenoh relay sends it down `connection`."""
+    """Feeds a worker's model from what the exporter's Zenoh relay sends it down `feed`."""
 
     transport = TRANSPORT
 
@@ -32,14 +31,14 @@ class RelayedZenohSource:
         config: ZenohConfig,
         model: FleetModel,
         shard: Shard,
-        connection: Connection,
+        feed: RelayedFeed,
         namespace_depth: int = DEFAULT_NAMESPACE_DEPTH,
     ) -> None:
-        """Feed `model` with the robots `shard` owns, from the batches read from `connection`."""
+        """Feed `model` with the robots `shard` owns, from the batches read from `feed`."""
         naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
         # The relay sends what every worker would see alike (a bad key, an unreachable router) to the first.
         self.ingest = ZenohIngest(config, model, shard, naming, counts_shared_errors=shard.worker == 0)
-        self._connection = connection
+        self._feed = feed
         self.samples_heard = 0  # samples the relay sent this worker
         self._stop = threading.Event()
 
@@ -53,10 +52,10 @@ class RelayedZenohSource:
         self._stop.set()
 
     def _read(self) -> None:
-        ingest = self.ingest
+        ingest, connection, ring = self.ingest, self._feed.connection, self._feed.ring
         while not self._stop.is_set():
             try:
-                batch = decode_batch(self._connection.recv_bytes())
+                batch = decode_batch(connection.recv_bytes(), ring)
             except (EOFError, OSError):
                 return  # the exporter is gone or stopping
             self.samples_heard += ingest.on_items(batch)
