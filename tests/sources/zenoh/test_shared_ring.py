@@ -54,6 +54,25 @@ def test_what_the_worker_has_not_taken_is_never_written_over() -> None:
     assert decode_batch(third, ring) == second
 
 
+def test_a_batch_that_would_wrap_waits_for_the_worker_to_have_read_the_ring_start() -> None:
+    ring = SharedRing.create(RING_BYTES)
+    first, second = encode_batch(samples(2, 300), ring), encode_batch(samples(2, 200, first=2), ring)
+    assert decode_batch(first, ring) == samples(2, 300)  # taken: 600 of the ring's first 1000 bytes free
+    exact = samples(2, 500, first=4)  # the whole ring, from its start: the second batch is not read yet
+    assert isinstance(pickle.loads(encode_batch(exact, ring)), list)
+    assert decode_batch(second, ring) == samples(2, 200, first=2)
+    placed = encode_batch(exact, ring)  # all read: the whole ring is free
+    assert not isinstance(pickle.loads(placed), list)
+    assert decode_batch(placed, ring) == exact
+
+
+def test_a_batch_without_samples_leaves_the_ring_alone() -> None:
+    ring = SharedRing.create(RING_BYTES)
+    batch = [(TOKEN, "token", False), (DROPPED, 1, [])]
+    assert pickle.loads(encode_batch(batch, ring)) == batch
+    assert ring._written == 0
+
+
 def test_a_batch_larger_than_the_ring_goes_down_the_pipe_and_a_pipe_batch_needs_no_ring() -> None:
     ring = SharedRing.create(RING_BYTES)
     batch = samples(1, RING_BYTES + 1)
@@ -78,8 +97,8 @@ def test_a_worker_process_takes_the_payloads_the_exporters_process_placed() -> N
     reader.close()
     child_answers.close()
     try:
-        for round in range(20):  # 900 bytes a batch: the ring goes round four times
-            batch = samples(3, 300, first=10 * round)
+        for turn in range(20):  # 900 bytes a batch: the ring goes round four times
+            batch = samples(3, 300, first=10 * turn)
             data = encode_batch(batch, ring)
             assert not isinstance(pickle.loads(data), list)  # in the ring: the worker released the last
             writer.send_bytes(data)

@@ -116,7 +116,7 @@ def _interpreter_options() -> list[str]:
 
 
 class _ArgumentPickler(pickle.Pickler):
-    """Pickles pipes and shared counts as the file descriptors the child receives under the same numbers."""
+    """Pickles pipes and memory files as the file descriptors the child receives under the same numbers."""
 
     def __init__(self, file: IO[bytes]) -> None:
         super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)

@@ -22,6 +22,7 @@ from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.model.events import PackedRowSink
 from overseer.sources.zenoh.relay import ZenohRelay
 from overseer.sources.zenoh.relay_items import RelayedFeed
+from overseer.sources.zenoh.shared_ring import SUPPORTED as SHARED_RING_SUPPORTED
 from overseer.sources.zenoh.shared_ring import SharedRing
 
 log = logging.getLogger(__name__)
@@ -213,7 +214,7 @@ class WorkerPool:
             events, child_events = _pipe(made, duplex=False)
             # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
             relayed, relay_writer = _pipe(made, duplex=False) if self._relay else (None, None)
-            ring = SharedRing.create() if self._relay else None
+            ring = SharedRing.create() if self._relay and SHARED_RING_SUPPORTED else None
             arguments = (
                 self.config,
                 index,

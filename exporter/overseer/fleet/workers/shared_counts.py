@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import mmap
 import os
-import tempfile
 import weakref
+
+from overseer.memory_file import create_memory_file
 
 SLOT_BYTES = 8
 
@@ -26,13 +27,7 @@ class SharedCounts:
     @classmethod
     def create(cls, length: int) -> SharedCounts:
         """`length` new counts, all zero."""
-        if hasattr(os, "memfd_create"):
-            descriptor = os.memfd_create("overseer-counts", os.MFD_CLOEXEC)
-        else:  # not Linux: a file no one else can open
-            descriptor, path = tempfile.mkstemp(prefix="overseer-counts-")
-            os.unlink(path)
-        os.ftruncate(descriptor, max(length, 1) * SLOT_BYTES)
-        return cls(descriptor, length)
+        return cls(create_memory_file("overseer-counts", max(length, 1) * SLOT_BYTES), length)
 
     def fileno(self) -> int:
         """The memory file's descriptor, to pass to a child."""

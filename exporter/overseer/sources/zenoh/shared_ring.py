@@ -1,31 +1,38 @@
 """The payloads the exporter's Zenoh relay hands one worker, in memory both processes map: no pipe copies.
 
 Through a pipe, a 4 kB payload is copied into the pickle, into the kernel, out of it and out of the
-pickle again: 6-11 µs a sample of the two processes' CPU, measured beside 2.0-2.3 µs when the relay
+pickle again: 6.5-11.5 µs a sample of the two processes' CPU, measured beside 2.0-2.3 µs when the relay
 copies it into a ring of memory the worker maps and the pipe carries only the batch's keys and lengths
-(bench/README.md, 2026-12-02). The relay writes each batch's payloads one after another into the ring
+(bench/README.md, 2026-12-02, midday). The relay writes each batch's payloads one after another into the ring
 and the worker, once it has copied them out, tells how far it has read in the ring's header; what it has
 not read yet is never overwritten. A batch that does not fit goes down the pipe whole, as before.
 
 Positions count bytes written since the ring was made and never wrap; a batch starts at the ring's
-beginning again rather than wrap around its end. The header's 8 bytes are written by the worker only, and
-read by the relay only: an older value read there only makes the ring seem fuller than it is.
+beginning again rather than wrap around its end. The payloads reach the worker before the pipe's message
+that names them, and the pipe's system calls order the two. The header's position is written by the
+worker only, after it has copied the payloads out, and read by the relay only: an older value there only
+makes the ring seem fuller than it is. That the relay never sees the position before the worker's
+copies are done, nor half written, holds where a store stays behind the loads before it and an aligned
+8-byte store is one (x86-64); elsewhere no ring is used (`SUPPORTED`) and the payloads take the pipe.
 """
 
 from __future__ import annotations
 
 import mmap
 import os
+import platform
 import struct
-import tempfile
 import weakref
 from collections.abc import Sequence
+
+from overseer.memory_file import create_memory_file
 
 HEADER_BYTES = 64  # the reader's position first; the rest keeps the payloads off the header's cache line
 # A worker's batch gathers for 50 ms: at 10,000 robots of 4 kB at 1 Hz shared by two workers, 1 MB. The
 # ring holds four; larger batches (a first look's backlog) take the pipe. Both processes map it whole.
 DEFAULT_RING_BYTES = 4 << 20
 _POSITION = struct.Struct("<Q")
+SUPPORTED = platform.machine().lower() in ("x86_64", "amd64")  # see above
 
 
 class SharedRing:
@@ -42,13 +49,12 @@ class SharedRing:
     @classmethod
     def create(cls, size: int = DEFAULT_RING_BYTES) -> SharedRing:
         """A new, empty ring of `size` bytes."""
-        if hasattr(os, "memfd_create"):
-            descriptor = os.memfd_create("overseer-relay", os.MFD_CLOEXEC)
-        else:  # not Linux: a file no one else can open
-            descriptor, path = tempfile.mkstemp(prefix="overseer-relay-")
-            os.unlink(path)
-        os.ftruncate(descriptor, HEADER_BYTES + size)
-        return cls(descriptor, size)
+        descriptor = create_memory_file("overseer-relay", HEADER_BYTES + size)
+        try:
+            return cls(descriptor, size)
+        except BaseException:
+            os.close(descriptor)
+            raise
 
     def fileno(self) -> int:
         """The memory file's descriptor, to pass to the worker."""
