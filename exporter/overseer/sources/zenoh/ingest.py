@@ -2,7 +2,8 @@
 
 A sample is its key, its attachment and its payload; a token is its key and whether it came or went. The
 same ingest is fed by the exporter's own session (`source.py`, one process) or, with several ingest
-workers, by the exporter's relay through a pipe and shared memory (`relayed.py`): it never sees Zenoh's objects.
+workers, by the exporter's relay through a pipe and shared memory (`relayed.py`): it never sees Zenoh's
+objects.
 
 A sample of an un-namespaced topic (diagnostic_updater publishes on `/diagnostics` whatever its node's
 namespace) belongs to the robot its publisher's node names: the sample's attachment carries the

@@ -2,10 +2,11 @@
 
 With several ingest workers, the session's drain only copies each sample out of Zenoh, finds its worker
 and queues it here; a thread of the outbox sends the items down the worker's pipe in batches, in order,
-their payloads through shared memory (`relay.py`). Zenoh's own channel therefore stays short even while a worker is seconds behind (a large
-fleet's first look). That matters twice: a sample waiting in Zenoh's channel holds the whole buffer its
-link read it into (17 kB a sample of 4 kB, measured at 10,000 robots: 1 GB for a backlog of 65,536), and
-a full channel stops Zenoh from reading the link, so the router drops what it cannot send.
+their payloads through shared memory (`relay.py`). Zenoh's own channel therefore stays short even while a
+worker is seconds behind (a large fleet's first look). That matters twice: a sample waiting in Zenoh's
+channel holds the whole buffer its link read it into (17 kB a sample of 4 kB, measured at 10,000 robots:
+1 GB for a backlog of 65,536), and a full channel stops Zenoh from reading the link, so the router drops
+what it cannot send.
 
 Beyond `limit` samples, a sample is dropped; the drops are queued as one item, in their place, with the
 highest number dropped of each publisher, so that the ingest counts them dropped, and not lost as well.
