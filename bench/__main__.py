@@ -29,6 +29,7 @@ BENCHMARKS = (
     "bench.bench_inventory",
     "bench.bench_first_look",
     "bench.bench_collector",
+    "bench.bench_worker_answers",
     "bench.bench_scale",
     "bench.bench_rules_at_scale",
 )

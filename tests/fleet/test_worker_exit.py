@@ -10,6 +10,7 @@ from multiprocessing.connection import Connection, Pipe
 from overseer.config import Config
 from overseer.config.dds import DdsConfig
 from overseer.config.events import EventsConfig
+from overseer.fleet.workers.answers import receive_answer
 from overseer.fleet.workers.launch import start_child
 from overseer.fleet.workers.process import READY, run_worker
 
@@ -34,7 +35,7 @@ def test_a_worker_ends_when_its_exporter_closes_the_pipe_even_if_the_interpreter
     child_events.close()
     try:
         assert requests.poll(EXIT_TIMEOUT_SECONDS), "the worker never said it was ready"
-        assert requests.recv() == (READY, None)
+        assert receive_answer(requests) == (READY, None)
         requests.close()  # the exporter leaves
         process.join(EXIT_TIMEOUT_SECONDS)
         assert process.exitcode == 0, "the worker outlived its exporter"

@@ -16,6 +16,7 @@ from typing import Any, NamedTuple
 
 from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
+from overseer.fleet.workers.answers import receive_answer
 from overseer.fleet.workers.launch import ChildProcess, start_child
 from overseer.fleet.workers.process import FAILED, READY, run_worker
 from overseer.fleet.workers.shared_counts import SharedCounts
@@ -188,7 +189,7 @@ class WorkerPool:
             if not handle.requests.poll(ANSWER_TIMEOUT_SECONDS):
                 self._fail(handle, f"it did not answer {kind!r} within {ANSWER_TIMEOUT_SECONDS:g}s")
                 return None
-            status, value = handle.requests.recv()
+            status, value = receive_answer(handle.requests)
         except (EOFError, OSError, ValueError):
             self._fail(handle, f"it went away while answering {kind!r}")
             return None
@@ -252,7 +253,7 @@ class WorkerPool:
                 raise WorkerStartError(
                     f"ingest worker {handle.index} did not start within {START_TIMEOUT_SECONDS:g}s"
                 )
-            status, detail = handle.requests.recv()
+            status, detail = receive_answer(handle.requests)
         except (EOFError, OSError) as error:
             raise WorkerStartError(
                 f"ingest worker {handle.index} exited while starting (exit code {handle.process.exitcode})"

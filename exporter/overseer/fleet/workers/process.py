@@ -19,6 +19,7 @@ from overseer.config import Config
 from overseer.fleet.documents import ComponentQuery
 from overseer.fleet.interface import FleetStart
 from overseer.fleet.local import LocalFleet
+from overseer.fleet.workers.answers import send_answer
 from overseer.fleet.workers.merge import portable_robots
 from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.garbage_collection import collect_in_large_batches
@@ -135,9 +136,9 @@ def _serve(
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)
-        requests.send((FAILED, f"{type(error).__name__}: {error}"))
+        send_answer(requests, (FAILED, f"{type(error).__name__}: {error}"))
         return 1
-    requests.send((READY, None))
+    send_answer(requests, (READY, None))
     while True:
         try:
             kind, argument = requests.recv()
@@ -149,7 +150,7 @@ def _serve(
             log.exception("ingest worker %d failed to answer %s", worker, kind)
             reply = ("error", f"{type(error).__name__}: {error}")
         try:
-            requests.send(reply)
+            send_answer(requests, reply)
         except (BrokenPipeError, OSError):
             break
     fleet.stop()

@@ -1,0 +1,68 @@
+"""A worker's answers cross the request pipe whole, in order, beside the requests going the other way."""
+
+from __future__ import annotations
+
+import os
+import struct
+from multiprocessing.connection import Connection, Pipe
+
+import pytest
+
+from overseer.fleet.workers.answers import receive_answer, send_answer
+from overseer.fleet.workers.launch import start_child
+
+TIMEOUT_SECONDS = 30.0
+LARGE = 8 * 1024 * 1024  # a worker's exposition part at 5,000 robots: many times a socket's buffer
+
+
+def answer_twice(requests: Connection) -> None:
+    """In the child: answer each of two requests with a large answer, then a small one."""
+    for _ in range(2):
+        size = requests.recv()
+        send_answer(requests, ("ok", bytes(range(256)) * (size // 256), os.getpid()))
+    send_answer(requests, ("ok", None))
+
+
+def answer_short(requests: Connection) -> None:
+    """In the child: begin an answer of 1 MB, write half of it, and leave."""
+    requests.recv()
+    descriptor = requests.fileno()
+    os.write(descriptor, struct.pack("!Q", 1 << 20))
+    os.write(descriptor, b"x" * (1 << 19))
+
+
+def test_large_answers_arrive_whole_and_in_order_from_a_worker_process() -> None:
+    requests, child_requests = Pipe()
+    child = start_child(answer_twice, (child_requests,))
+    child_requests.close()
+    try:
+        for size in (LARGE, LARGE // 2):
+            requests.send(size)  # a request, as the pool sends it, on the same pipe
+            assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
+            status, data, pid = receive_answer(requests)
+            assert (status, pid) == ("ok", child.pid)
+            assert data == bytes(range(256)) * (size // 256)
+        assert receive_answer(requests) == ("ok", None)
+        child.join(TIMEOUT_SECONDS)
+        assert child.exitcode == 0
+        with pytest.raises(EOFError):
+            receive_answer(requests)  # the worker's end left with it
+    finally:
+        child.kill()
+        requests.close()
+
+
+def test_an_answer_cut_short_by_a_worker_that_leaves_is_an_eof_error_not_a_partial_answer() -> None:
+    requests, child_requests = Pipe()
+    child = start_child(answer_short, (child_requests,))
+    child_requests.close()
+    try:
+        requests.send("begin")
+        assert requests.poll(TIMEOUT_SECONDS), "the worker never began its answer"
+        with pytest.raises(EOFError, match="524288 bytes short"):
+            receive_answer(requests)
+        child.join(TIMEOUT_SECONDS)
+        assert child.exitcode == 0
+    finally:
+        child.kill()
+        requests.close()
