@@ -33,8 +33,10 @@ class RelayedFeed:
 
 def encode_batch(items: list[Item], ring: SharedRing | None = None) -> bytes:
     """One batch as the bytes sent down the pipe, its payloads placed in `ring` when they fit there."""
-    payloads = [item[3] for item in items if item[0] == SAMPLE] if ring is not None else []
-    if ring is not None and payloads:
+    if ring is None:
+        return pickle.dumps(items, protocol=pickle.HIGHEST_PROTOCOL)
+    payloads = [item[3] for item in items if item[0] == SAMPLE]
+    if payloads:
         placed = ring.place(payloads)
         if placed is not None:
             lengths = [(SAMPLE, *item[1:3], len(item[3])) if item[0] == SAMPLE else item for item in items]

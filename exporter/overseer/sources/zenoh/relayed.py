@@ -2,8 +2,8 @@
 
 The exporter's process holds the one Zenoh session (`relay.py`) and sends each worker, down a pipe, the
 samples of the robots it owns and every publisher token, in order, the samples' payloads through a ring of
-memory both processes map (`shared_ring.py`). This reads them into the same ingest
-as a session of its own would (`ingest.py`).
+memory both processes map (`shared_ring.py`). This reads them into the same ingest as a session of its own
+would (`ingest.py`).
 """
 
 from __future__ import annotations
