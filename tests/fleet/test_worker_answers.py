@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import socket
 import struct
 from multiprocessing.connection import Connection, Pipe
 
@@ -64,5 +65,23 @@ def test_an_answer_cut_short_by_a_worker_that_leaves_is_an_eof_error_not_a_parti
         child.join(TIMEOUT_SECONDS)
         assert child.exitcode == 0
     finally:
+        child.kill()
+        requests.close()
+
+
+def test_reading_an_answer_leaves_the_pipe_blocking_and_open_whatever_the_default_socket_timeout() -> None:
+    requests, child_requests = Pipe()
+    child = start_child(answer_twice, (child_requests,))
+    child_requests.close()
+    socket.setdefaulttimeout(5.0)  # a socket made now is non-blocking, and the pipe's flags are its own
+    try:
+        requests.send(1024)
+        assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
+        assert receive_answer(requests)[0] == "ok"
+        assert os.get_blocking(requests.fileno()), "the pipe was left non-blocking"
+        requests.send(1024)  # the descriptor is the connection's still
+        assert receive_answer(requests)[0] == "ok"
+    finally:
+        socket.setdefaulttimeout(None)
         child.kill()
         requests.close()

@@ -2,9 +2,10 @@
 
 A multiprocessing `Connection` reads a message in as many reads as the socket holds at a time (a couple
 of hundred kilobytes), and each read gives up the interpreter lock and waits for it again. Beside the
-exporter's busy threads (the Zenoh relay's) each wait lasts up to the switch interval (5 ms): the
-8 MB exposition part of a worker of 5,000 robots took 0.2-0.4 s to read that way, and a scrape waits
-for it. Read with `MSG_WAITALL` the kernel fills the whole answer before the call returns: one wait.
+exporter's busy threads (the Zenoh relay's) each wait lasts up to the switch interval (5 ms): the 8 MB
+exposition part of a worker of 5,000 robots took 0.06-0.4 s to read that way beside one or two busy
+threads, and a scrape waits for it. Read with `MSG_WAITALL` the kernel fills the whole answer before the
+call returns: one wait.
 
 An answer is its pickle's length (8 bytes) and the pickle. The requests still go the other way as
 `Connection` messages: each direction has one framing of its own. The pipe joins two processes of one
@@ -33,9 +34,13 @@ def send_answer(connection: Connection, answer: Any) -> None:
 
 def receive_answer(connection: Connection) -> Any:
     """The next answer a worker wrote to `connection` (EOFError when it closed its end first)."""
-    with socket.socket(fileno=os.dup(connection.fileno())) as reader:
+    reader = socket.socket(fileno=connection.fileno())  # the same descriptor, lent for this answer
+    try:
+        reader.settimeout(None)  # blocking, whatever `socket.setdefaulttimeout` says (it is the pipe's too)
         (length,) = _LENGTH.unpack(_read_exactly(reader, _LENGTH.size))
         return pickle.loads(_read_exactly(reader, length))  # written by this exporter's own worker
+    finally:
+        reader.detach()  # the connection keeps its descriptor
 
 
 def _write_all(descriptor: int, data: bytes) -> None:

@@ -140,6 +140,9 @@ class WorkerPool:
         try:
             for handle in handles:
                 handle.lock.acquire()
+                if not handle.ready:  # failed while this waited: a late answer may still be in its pipe
+                    handle.lock.release()
+                    continue
                 try:
                     handle.requests.send((kind, argument))
                     asked.append(handle)
@@ -177,6 +180,8 @@ class WorkerPool:
         if handle is None or not handle.ready:
             return None
         with handle.lock:
+            if not handle.ready:  # failed while this waited: a late answer may still be in its pipe
+                return None
             try:
                 handle.requests.send((kind, argument))
             except (OSError, ValueError):
