@@ -5,12 +5,14 @@ from __future__ import annotations
 import os
 import socket
 import struct
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from multiprocessing.connection import Connection, Pipe
 
 import pytest
 
 from overseer.fleet.workers.answers import receive_answer, send_answer
-from overseer.fleet.workers.launch import start_child
+from overseer.fleet.workers.launch import ChildProcess, start_child
 
 TIMEOUT_SECONDS = 30.0
 LARGE = 8 * 1024 * 1024  # a worker's exposition part at 5,000 robots: many times a socket's buffer
@@ -32,11 +34,21 @@ def answer_short(requests: Connection) -> None:
     os.write(descriptor, b"x" * (1 << 19))
 
 
-def test_large_answers_arrive_whole_and_in_order_from_a_worker_process() -> None:
+@contextmanager
+def worker(target: Callable[[Connection], None]) -> Iterator[tuple[Connection, ChildProcess]]:
+    """`target` run in a child started as the pool starts its workers; the exporter's end of its pipe."""
     requests, child_requests = Pipe()
-    child = start_child(answer_twice, (child_requests,))
+    child = start_child(target, (child_requests,))
     child_requests.close()
     try:
+        yield requests, child
+    finally:
+        child.kill()
+        requests.close()
+
+
+def test_large_answers_arrive_whole_and_in_order_from_a_worker_process() -> None:
+    with worker(answer_twice) as (requests, child):
         for size in (LARGE, LARGE // 2):
             requests.send(size)  # a request, as the pool sends it, on the same pipe
             assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
@@ -48,40 +60,27 @@ def test_large_answers_arrive_whole_and_in_order_from_a_worker_process() -> None
         assert child.exitcode == 0
         with pytest.raises(EOFError):
             receive_answer(requests)  # the worker's end left with it
-    finally:
-        child.kill()
-        requests.close()
 
 
 def test_an_answer_cut_short_by_a_worker_that_leaves_is_an_eof_error_not_a_partial_answer() -> None:
-    requests, child_requests = Pipe()
-    child = start_child(answer_short, (child_requests,))
-    child_requests.close()
-    try:
+    with worker(answer_short) as (requests, child):
         requests.send("begin")
         assert requests.poll(TIMEOUT_SECONDS), "the worker never began its answer"
         with pytest.raises(EOFError, match="524288 bytes short"):
             receive_answer(requests)
         child.join(TIMEOUT_SECONDS)
         assert child.exitcode == 0
-    finally:
-        child.kill()
-        requests.close()
 
 
 def test_reading_an_answer_leaves_the_pipe_blocking_and_open_whatever_the_default_socket_timeout() -> None:
-    requests, child_requests = Pipe()
-    child = start_child(answer_twice, (child_requests,))
-    child_requests.close()
-    socket.setdefaulttimeout(5.0)  # a socket made now is non-blocking, and the pipe's flags are its own
-    try:
-        requests.send(1024)
-        assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
-        assert receive_answer(requests)[0] == "ok"
-        assert os.get_blocking(requests.fileno()), "the pipe was left non-blocking"
-        requests.send(1024)  # the descriptor is the connection's still
-        assert receive_answer(requests)[0] == "ok"
-    finally:
-        socket.setdefaulttimeout(None)
-        child.kill()
-        requests.close()
+    with worker(answer_twice) as (requests, _child):
+        socket.setdefaulttimeout(5.0)  # a socket made now is non-blocking, and the pipe's flags are its own
+        try:
+            requests.send(1024)
+            assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
+            assert receive_answer(requests)[0] == "ok"
+            assert os.get_blocking(requests.fileno()), "the pipe was left non-blocking"
+            requests.send(1024)  # the descriptor is the connection's still
+            assert receive_answer(requests)[0] == "ok"
+        finally:
+            socket.setdefaulttimeout(None)

@@ -140,15 +140,10 @@ class WorkerPool:
         try:
             for handle in handles:
                 handle.lock.acquire()
-                if not handle.ready:  # failed while this waited: a late answer may still be in its pipe
-                    handle.lock.release()
-                    continue
-                try:
-                    handle.requests.send((kind, argument))
+                if self._request(handle, kind, argument):
                     asked.append(handle)
-                except (OSError, ValueError):
+                else:
                     handle.lock.release()
-                    self._fail(handle, "its request pipe is closed")
             while asked:
                 handle = asked[0]
                 try:
@@ -180,14 +175,18 @@ class WorkerPool:
         if handle is None or not handle.ready:
             return None
         with handle.lock:
-            if not handle.ready:  # failed while this waited: a late answer may still be in its pipe
-                return None
-            try:
-                handle.requests.send((kind, argument))
-            except (OSError, ValueError):
-                self._fail(handle, "its request pipe is closed")
-                return None
-            return self._receive(handle, kind)
+            return self._receive(handle, kind) if self._request(handle, kind, argument) else None
+
+    def _request(self, handle: _Handle, kind: str, argument: Any) -> bool:
+        """Send a request to a worker whose lock is held; False when it cannot be asked (it is failed)."""
+        if not handle.ready:  # failed while the lock was awaited: a late answer may still be in its pipe
+            return False
+        try:
+            handle.requests.send((kind, argument))
+        except (OSError, ValueError):
+            self._fail(handle, "its request pipe is closed")
+            return False
+        return True
 
     def _receive(self, handle: _Handle, kind: str) -> tuple[Any] | None:
         try:
