@@ -60,7 +60,7 @@ def read_times(requests: Connection, busy_threads: int, reads: int) -> dict[str,
             for framing, times_of in times.items():
                 started = time.perf_counter()
                 requests.send(framing)
-                answer = requests.recv() if framing == CONNECTION else receive_answer(requests)
+                answer = requests.recv() if framing == CONNECTION else receive_answer(requests, 60.0)
                 times_of.append(time.perf_counter() - started)
                 assert answer[0] == "ok"
     finally:

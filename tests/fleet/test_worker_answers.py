@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import socket
 import struct
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from multiprocessing.connection import Connection, Pipe
@@ -34,6 +35,12 @@ def answer_short(requests: Connection) -> None:
     os.write(descriptor, b"x" * (1 << 19))
 
 
+def answer_halfway_and_hang(requests: Connection) -> None:
+    """In the child: begin an answer of 1 MB, write half of it, and stop there (the pipe left open)."""
+    answer_short(requests)
+    time.sleep(TIMEOUT_SECONDS)
+
+
 @contextmanager
 def worker(target: Callable[[Connection], None]) -> Iterator[tuple[Connection, ChildProcess]]:
     """`target` run in a child started as the pool starts its workers; the exporter's end of its pipe."""
@@ -52,14 +59,14 @@ def test_large_answers_arrive_whole_and_in_order_from_a_worker_process() -> None
         for size in (LARGE, LARGE // 2):
             requests.send(size)  # a request, as the pool sends it, on the same pipe
             assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
-            status, data, pid = receive_answer(requests)
+            status, data, pid = receive_answer(requests, TIMEOUT_SECONDS)
             assert (status, pid) == ("ok", child.pid)
             assert data == bytes(range(256)) * (size // 256)
-        assert receive_answer(requests) == ("ok", None)
+        assert receive_answer(requests, TIMEOUT_SECONDS) == ("ok", None)
         child.join(TIMEOUT_SECONDS)
         assert child.exitcode == 0
         with pytest.raises(EOFError):
-            receive_answer(requests)  # the worker's end left with it
+            receive_answer(requests, TIMEOUT_SECONDS)  # the worker's end left with it
 
 
 def test_an_answer_cut_short_by_a_worker_that_leaves_is_an_eof_error_not_a_partial_answer() -> None:
@@ -67,7 +74,7 @@ def test_an_answer_cut_short_by_a_worker_that_leaves_is_an_eof_error_not_a_parti
         requests.send("begin")
         assert requests.poll(TIMEOUT_SECONDS), "the worker never began its answer"
         with pytest.raises(EOFError, match="524288 bytes short"):
-            receive_answer(requests)
+            receive_answer(requests, TIMEOUT_SECONDS)
         child.join(TIMEOUT_SECONDS)
         assert child.exitcode == 0
 
@@ -78,9 +85,26 @@ def test_reading_an_answer_leaves_the_pipe_blocking_and_open_whatever_the_defaul
         try:
             requests.send(1024)
             assert requests.poll(TIMEOUT_SECONDS), "the worker never answered"
-            assert receive_answer(requests)[0] == "ok"
+            assert receive_answer(requests, TIMEOUT_SECONDS)[0] == "ok"
             assert os.get_blocking(requests.fileno()), "the pipe was left non-blocking"
             requests.send(1024)  # the descriptor is the connection's still
-            assert receive_answer(requests)[0] == "ok"
+            assert receive_answer(requests, TIMEOUT_SECONDS)[0] == "ok"
         finally:
             socket.setdefaulttimeout(None)
+
+
+def test_an_answer_stopped_halfway_times_out_and_leaves_the_pipe_blocking_without_a_deadline() -> None:
+    with worker(answer_halfway_and_hang) as (requests, child):
+        requests.send("begin")
+        assert requests.poll(TIMEOUT_SECONDS), "the worker never began its answer"
+        began = time.monotonic()
+        with pytest.raises(TimeoutError, match="524288 bytes short"):
+            receive_answer(requests, 0.5)
+        assert 0.5 <= time.monotonic() - began < TIMEOUT_SECONDS / 2
+        assert child.is_alive(), "the worker left: this was an end of file, not a timeout"
+        assert os.get_blocking(requests.fileno()), "the pipe was left non-blocking"
+        lent = socket.socket(fileno=requests.fileno())
+        try:  # the deadline was the read's own: the pipe's later reads wait as long as they must
+            assert lent.getsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, 16) == bytes(16)
+        finally:
+            lent.detach()

@@ -35,7 +35,7 @@ def test_a_worker_ends_when_its_exporter_closes_the_pipe_even_if_the_interpreter
     child_events.close()
     try:
         assert requests.poll(EXIT_TIMEOUT_SECONDS), "the worker never said it was ready"
-        assert receive_answer(requests) == (READY, None)
+        assert receive_answer(requests, EXIT_TIMEOUT_SECONDS) == (READY, None)
         requests.close()  # the exporter leaves
         process.join(EXIT_TIMEOUT_SECONDS)
         assert process.exitcode == 0, "the worker outlived its exporter"

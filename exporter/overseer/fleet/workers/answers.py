@@ -5,7 +5,9 @@ of hundred kilobytes), and each read gives up the interpreter lock and waits for
 exporter's busy threads (the Zenoh relay's) each wait lasts up to the switch interval (5 ms): the 8 MB
 exposition part of a worker of 5,000 robots took 0.06-0.4 s to read that way beside one or two busy
 threads, and a scrape waits for it. Read with `MSG_WAITALL` the kernel fills the whole answer before the
-call returns: one wait.
+call returns: one wait. A worker stopped halfway through an answer (by a signal, or swapped out for
+good) would keep that call waiting forever: the kernel gives it a deadline of its own (`SO_RCVTIMEO`,
+which leaves the descriptor blocking), and it ends in a TimeoutError.
 
 An answer is its pickle's length (8 bytes) and the pickle. The requests still go the other way as
 `Connection` messages: each direction has one framing of its own. The pipe joins two processes of one
@@ -18,10 +20,13 @@ import os
 import pickle
 import socket
 import struct
+import time
 from multiprocessing.connection import Connection
 from typing import Any
 
 _LENGTH = struct.Struct("!Q")
+_TIMEVAL = struct.Struct("@ll")  # struct timeval, as SO_RCVTIMEO takes it on Linux
+_NO_DEADLINE = _TIMEVAL.pack(0, 0)
 
 
 def send_answer(connection: Connection, answer: Any) -> None:
@@ -32,14 +37,20 @@ def send_answer(connection: Connection, answer: Any) -> None:
     _write_all(descriptor, data)
 
 
-def receive_answer(connection: Connection) -> Any:
-    """The next answer a worker wrote to `connection` (EOFError when it closed its end first)."""
+def receive_answer(connection: Connection, timeout: float) -> Any:
+    """The next answer a worker wrote to `connection`, read within `timeout` seconds once begun.
+
+    EOFError when the worker closed its end first; TimeoutError when the whole answer did not arrive in
+    time (the pipe is then out of step: the caller gives the worker up).
+    """
     reader = socket.socket(fileno=connection.fileno())  # the same descriptor, lent for this answer
+    deadline = time.monotonic() + timeout
     try:
         reader.settimeout(None)  # blocking, whatever `socket.setdefaulttimeout` says (it is the pipe's too)
-        (length,) = _LENGTH.unpack(_read_exactly(reader, _LENGTH.size))
-        return pickle.loads(_read_exactly(reader, length))  # written by this exporter's own worker
+        (length,) = _LENGTH.unpack(_read_exactly(reader, _LENGTH.size, deadline))
+        return pickle.loads(_read_exactly(reader, length, deadline))  # written by this exporter's own worker
     finally:
+        reader.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, _NO_DEADLINE)
         reader.detach()  # the connection keeps its descriptor
 
 
@@ -50,12 +61,21 @@ def _write_all(descriptor: int, data: bytes) -> None:
         view = view[os.write(descriptor, view) :]
 
 
-def _read_exactly(reader: socket.socket, length: int) -> bytearray:
+def _read_exactly(reader: socket.socket, length: int, deadline: float) -> bytearray:
     buffer = bytearray(length)
     view = memoryview(buffer)
     filled = 0
-    while filled < length:  # short only when a signal came or the writer closed its end
-        received = reader.recv_into(view[filled:], length - filled, socket.MSG_WAITALL)
+    while filled < length:  # short only when a signal came, the deadline passed or the writer left
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise TimeoutError(f"a worker's answer stopped {length - filled} bytes short of its end")
+        seconds, fraction = divmod(remaining, 1.0)
+        limit = _TIMEVAL.pack(int(seconds), max(1, int(fraction * 1e6)))  # all zero would mean none
+        reader.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, limit)
+        try:
+            received = reader.recv_into(view[filled:], length - filled, socket.MSG_WAITALL)
+        except BlockingIOError:  # the deadline passed before a byte came
+            continue
         if not received:
             raise EOFError(f"the worker closed its pipe {length - filled} bytes short of an answer")
         filled += received

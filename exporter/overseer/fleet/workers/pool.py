@@ -193,7 +193,10 @@ class WorkerPool:
             if not handle.requests.poll(ANSWER_TIMEOUT_SECONDS):
                 self._fail(handle, f"it did not answer {kind!r} within {ANSWER_TIMEOUT_SECONDS:g}s")
                 return None
-            status, value = receive_answer(handle.requests)
+            status, value = receive_answer(handle.requests, ANSWER_TIMEOUT_SECONDS)
+        except TimeoutError:
+            self._fail(handle, f"it stopped halfway through answering {kind!r}")
+            return None
         except (EOFError, OSError, ValueError):
             self._fail(handle, f"it went away while answering {kind!r}")
             return None
@@ -257,7 +260,7 @@ class WorkerPool:
                 raise WorkerStartError(
                     f"ingest worker {handle.index} did not start within {START_TIMEOUT_SECONDS:g}s"
                 )
-            status, detail = receive_answer(handle.requests)
+            status, detail = receive_answer(handle.requests, START_TIMEOUT_SECONDS)
         except (EOFError, OSError) as error:
             raise WorkerStartError(
                 f"ingest worker {handle.index} exited while starting (exit code {handle.process.exitcode})"
