@@ -28,7 +28,8 @@ the same invocation (`--workers 1,2,4`, one shard): the whole about 1 time one w
 worker at most 1/N of it if the workers divide the ingest, the whole about N times and the busiest about
 once if each did all of it. The generator's own CPU per 1,000 robots is printed beside every figure.
 `--transport dds` publishes raw DDS writes on a fresh loopback domain instead, with no router and no
-probe (it publishes as rmw_zenoh).
+probe (it publishes as rmw_zenoh); with `--dds-shared-topic` every robot writes the absolute
+`/diagnostics`, as diagnostic_updater does, the ROS graph naming each writer's node.
 
 With `--prometheus-seconds S` the generator goes on after the window while Debian's Prometheus scrapes
 the exporter for S seconds (every `--scrape-interval`, with its own Accept header and gzip) and, in the
@@ -255,11 +256,12 @@ class Wiring:
 
 
 @contextlib.contextmanager
-def wiring(transport: str, directory: Path) -> Iterator[Wiring]:
-    """A Zenoh router for both sides, or a fresh DDS domain on loopback."""
+def wiring(transport: str, directory: Path, shared_topic: bool = False) -> Iterator[Wiring]:
+    """A Zenoh router for both sides, or a fresh DDS domain on loopback (robots on `/diagnostics`: shared)."""
     if transport == DDS:
         domain = fresh_domain_id()
-        yield Wiring((), ("--transport=dds", f"--domain={domain}"), domain)  # Zenoh is off unless asked
+        shared = ("--dds.shared-topic",) if shared_topic else ()
+        yield Wiring((), ("--transport=dds", f"--domain={domain}", *shared), domain)  # Zenoh off unless asked
         return
     with running_router_process(directory) as (port, router):
         loadgen_args = (f"--zenoh.connect={endpoint(port)}", "--zenoh.listen=tcp/127.0.0.1:0")
@@ -537,6 +539,11 @@ def shipped_rules_rows(
     ]
 
 
+def transport_label(transport: str, shared_topic: bool) -> str:
+    """The transport as the rows name it: over DDS, whether every robot writes the one `/diagnostics`."""
+    return f"{transport}, every robot on /diagnostics" if shared_topic else transport
+
+
 def setup_label(shards: int, store: str | None, head_start: float, exporter_options: Sequence[str]) -> str:
     """What a row's name says after the worker count: shards, the agent's store, a head start, options."""
     label = f" in each of {shards} shards" if shards > 1 else ""
@@ -577,6 +584,7 @@ def run(
     shards: int = 1,
     store: str | None = None,
     icinga2_interval: float | None = None,
+    shared_topic: bool = False,
 ) -> list[Row]:
     """Publish `shape`'s fleet at `rate` for `seconds` into an exporter with `workers` ingest workers.
 
@@ -589,11 +597,13 @@ def run(
     `shards`: that many exporters (`--shard I/N`, `workers` each) share the fleet; the figures are theirs
     together. `store`: Prometheus scrapes in agent mode and sends the samples to that store (STORES).
     `icinga2_interval`: the exporter pushes the fleet to a real Icinga 2 every that many seconds.
+    `shared_topic`: over DDS, every robot writes `/diagnostics`, as diagnostic_updater publishes.
     """
     plural = "s" if workers > 1 else ""
     robots = shape.robots
     setup = setup_label(shards, store, head_start, exporter_options)
-    label = f"{fleet_label(shape, rate)}, {transport}, {workers} worker{plural}{setup}"
+    over = transport_label(transport, shared_topic)
+    label = f"{fleet_label(shape, rate)}, {over}, {workers} worker{plural}{setup}"
     phases = 1 + rules  # the floor's, then the rules'
     publishing = seconds + (
         phases * (prometheus_seconds + 2 * interval) + PROMETHEUS_SETUP_SECONDS if prometheus_seconds else 0
@@ -601,7 +611,7 @@ def run(
     publishing += PAGE_SECONDS if page else 0
     with (
         tempfile.TemporaryDirectory() as tmp,
-        wiring(transport, Path(tmp)) as wires,
+        wiring(transport, Path(tmp), shared_topic) as wires,
         icinga2_receiving(Path(tmp), icinga2_interval) as icinga2,
         running_shards(
             Path(tmp),
@@ -858,6 +868,8 @@ def check_window(options: argparse.Namespace) -> None:
         raise ValueError(f"--icinga2: the push's interval must be positive, got {options.icinga2}")
     if options.icinga2 is not None and options.shards > 1:
         raise ValueError("--icinga2: with one exporter only (each shard would push as its own exporter)")
+    if options.dds_shared_topic and options.transport != DDS:
+        raise ValueError("--dds-shared-topic: needs --transport dds")
     if options.floor and options.transport != ZENOH:
         raise ValueError("--floor: its counting subscriber hears the fleet through the Zenoh router only")
 
@@ -868,6 +880,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--robots", default="1000", help="comma-separated fleet sizes (default 1000)")
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     parser.add_argument("--transport", default=ZENOH, choices=TRANSPORTS, help="zenoh (default) or dds")
+    parser.add_argument(
+        "--dds-shared-topic",
+        action="store_true",
+        help="with --transport dds: every robot writes the absolute /diagnostics, its node named in the ROS "
+        "graph, as diagnostic_updater publishes (default: rt/<robot>/diagnostics_agg each)",
+    )
     parser.add_argument("--seconds", type=float, default=60)
     parser.add_argument(
         "--prometheus-seconds",
@@ -956,11 +974,13 @@ def main(argv: Sequence[str] | None = None) -> None:
                 options.shards,
                 options.prometheus_agent,
                 options.icinga2,
+                options.dds_shared_topic,
             )
             runs.append((workers, measured))
             rows += measured
         if options.shards == 1:  # with shards, a worker's share would be of its shard's, not the fleet's
-            fleet = f"{fleet_label(shape_of(options, robots), options.rate)}, {options.transport}"
+            transport = transport_label(options.transport, options.dds_shared_topic)
+            fleet = f"{fleet_label(shape_of(options, robots), options.rate)}, {transport}"
             setup = setup_label(1, options.prometheus_agent, options.head_start, options.exporter_option)
             rows += compared_with_one_worker(fleet, setup, runs)
     emit(rows)

@@ -56,6 +56,7 @@ class LoadSettings:
     transport: str = ZENOH
     zenoh: ZenohEndpoints = field(default_factory=ZenohEndpoints)
     domain: int = 0  # ROS domain: the Zenoh keys' first chunk, or the DDS domain
+    dds_shared_topic: bool = False  # DDS: every robot on `/diagnostics`, as diagnostic_updater publishes
     namespace_prefix: str = "robot"  # robots are PREFIX1 ... PREFIXN
     duration: float | None = None  # seconds of publishing; None: until stopped
     wait_for_subscribers: float = 0.0  # seconds to wait, before publishing, for every robot to be matched
@@ -158,6 +159,7 @@ class LoadGenerator:
         fleet = Fleet(settings.shape)
         for robot in range(robots):
             wire.open(robot)
+        wire.declared()
         setup_seconds = time.monotonic() - setup_started
         print(f"ready: {robots} robots declared in {setup_seconds:.1f} s", flush=True)
         if settings.ready_file:
@@ -182,6 +184,8 @@ class LoadGenerator:
                 wire.close(robot)
             for robot in back:
                 wire.open(robot)
+            if down or back:
+                wire.declared()
             went_down, came_back = went_down + len(down), came_back + len(back)
             stamp = _STAMP.pack(*divmod(time.time_ns(), 1_000_000_000))
             for due in pacing.due(elapsed):
@@ -296,6 +300,13 @@ def add_wire_arguments(parser: argparse.ArgumentParser) -> None:
         help="robots sharing one Zenoh session (default 1000)",
     )
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id (default 0)")
+    parser.add_argument(
+        "--dds.shared-topic",
+        dest="dds_shared_topic",
+        action="store_true",
+        help="DDS: every robot writes the absolute /diagnostics, its node named in the ROS graph, as "
+        "diagnostic_updater publishes (default: rt/<robot>/diagnostics_agg each)",
+    )
     parser.add_argument("--duration", type=float, help="seconds of publishing (default: until stopped)")
     parser.add_argument(
         "--wait-for-subscribers",
@@ -336,6 +347,7 @@ def settings_of(args: argparse.Namespace) -> LoadSettings:
             args.robots_per_session,
         ),
         domain=args.domain,
+        dds_shared_topic=args.dds_shared_topic,
         namespace_prefix=args.namespace_prefix,
         duration=args.duration,
         wait_for_subscribers=args.wait_for_subscribers,
@@ -398,7 +410,7 @@ def shape_arguments(shape: FleetShape, rate: float) -> list[str]:
 def wire_of(settings: LoadSettings) -> Wire:
     """The transport the settings ask for, opened."""
     if settings.transport == DDS:
-        return DdsWire(settings.robot_names(), settings.domain)
+        return DdsWire(settings.robot_names(), settings.domain, settings.dds_shared_topic)
     return ZenohWire(settings.robot_names(), settings.domain, settings.zenoh)
 
 

@@ -5,7 +5,9 @@ publisher on `<domain>/<ns>/diagnostics_agg/<type>/<hash>`, the liveliness token
 node and of that publisher, and the 33-byte attachment, built once and patched in place with each
 sample's sequence number and source timestamp. DDS: one loopback-only
 Cyclone participant, one writer per robot topic `rt/<ns>/diagnostics_agg` with ROS 2's default QoS,
-written the payload's bytes as they are (`ddspy_write`, as `testbed.dds_writer` does).
+written the payload's bytes as they are (`ddspy_write`, as `testbed.dds_writer` does); or, as
+diagnostic_updater publishes (`shared_topic`), every robot's writer on the absolute `rt/diagnostics`, the
+ROS graph (`ros_discovery_info`) telling each writer's node, `/<ns>/diagnostic_updater`.
 
 `publish` is the hot loop: for each robot of a range it patches the stamp into the robot's payload and
 sends it. Both libraries copy the bytes before the call returns, so the next change can be made in
@@ -23,16 +25,21 @@ from typing import Any, Protocol
 
 import zenoh
 from cyclonedds._clayer import ddspy_write
+from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.topic import Topic
+from cyclonedds.util import duration
 
 from bench.loadgen_payloads import STAMP
+from overseer.codec.discovery_info import TOPIC as GRAPH_TOPIC
+from overseer.codec.discovery_info import NodeEntities, ParticipantEntities, encode_participant_entities
 from overseer.simulator.zenoh_publisher import NODE_NAME, attachment
 from overseer.sources.dds.cyclone_config import configure_domain, loopback_only_config
 from overseer.sources.dds.source import ROS_DEFAULT_QOS
 from overseer.sources.dds.types import DiagnosticArray as DdsDiagnosticArray
-from overseer.sources.topic_names import AGGREGATED, dds_topic_name
+from overseer.sources.dds.types import ParticipantEntitiesInfo
+from overseer.sources.topic_names import AGGREGATED, RAW, dds_topic_name
 from overseer.sources.zenoh.keys import (
     DIAGNOSTIC_ARRAY_HASH,
     data_key,
@@ -44,6 +51,7 @@ from overseer.sources.zenoh.keys import (
 ZENOH = "zenoh"
 DDS = "dds"
 TRANSPORTS = (ZENOH, DDS)
+UPDATER_NODE = "diagnostic_updater"  # the node each robot's writer of the shared topic belongs to
 SESSION_TX_BATCHES = 16  # batches waiting on a session's link, as on the shipped router's (deploy/zenoh)
 # Writes a sample's sequence number and source timestamp into an attachment: (buffer, 0, sequence, ns).
 patch_attachment = struct.Struct("<qq").pack_into
@@ -59,6 +67,9 @@ class Wire(Protocol):
 
     def close(self, robot: int) -> None:
         """Undeclare robot `robot`'s publisher: the robot goes down."""
+
+    def declared(self) -> None:
+        """Announce what the `open` and `close` calls since the last call changed, where that is apart."""
 
     def publish(self, first: int, stop: int, payloads: Sequence[bytearray], stamp: bytes) -> int:
         """Send the payloads of the open robots from `first` to `stop` - 1, stamped; how many were sent."""
@@ -142,6 +153,9 @@ class ZenohWire:
         if publisher is not None:
             publisher.undeclare()  # type: ignore[no-untyped-call]
 
+    def declared(self) -> None:
+        """Nothing: each publisher's liveliness token announces it as it is declared."""
+
     def publish(self, first: int, stop: int, payloads: Sequence[bytearray], stamp: bytes) -> int:
         """Put each open robot's payload with its attachment's next sequence number and the time now."""
         timestamp = time.time_ns()
@@ -172,10 +186,13 @@ class ZenohWire:
 
 
 class DdsWire:
-    """The fleet as one loopback-only Cyclone participant with a raw writer per robot topic."""
+    """The fleet as one loopback-only Cyclone participant with a raw writer per robot."""
 
-    def __init__(self, names: Sequence[str], domain: int) -> None:
-        """Join `domain` on loopback only; no robot's writer is made yet."""
+    def __init__(self, names: Sequence[str], domain: int, shared_topic: bool = False) -> None:
+        """Join `domain` on loopback only; no robot's writer is made yet.
+
+        `shared_topic`: every robot writes `rt/diagnostics`, its node named in the ROS graph.
+        """
         configure_domain(domain, loopback_only_config(), keep_existing=True)
         self._participant = DomainParticipant(domain)
         self._publisher = Publisher(self._participant)
@@ -183,11 +200,22 @@ class DdsWire:
         self._topics: list[Topic[DdsDiagnosticArray] | None] = [None] * len(names)
         self._writers: list[DataWriter[DdsDiagnosticArray] | None] = [None] * len(names)
         self._refs: list[int | None] = [None] * len(names)
+        self._shared: Topic[DdsDiagnosticArray] | None = None
+        self._graph: DataWriter[ParticipantEntitiesInfo] | None = None
+        if shared_topic:
+            self._shared = Topic(
+                self._participant, dds_topic_name("", RAW), DdsDiagnosticArray, qos=ROS_DEFAULT_QOS
+            )
+            graph_qos = Qos(
+                Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.Durability.TransientLocal
+            )
+            graph_topic = Topic(self._participant, GRAPH_TOPIC, ParticipantEntitiesInfo, qos=graph_qos)
+            self._graph = DataWriter(self._participant, graph_topic, qos=graph_qos)
         self.failed = 0
 
     def open(self, robot: int) -> None:
-        """Make the robot's writer on `rt/<ns>/diagnostics_agg`, with ROS 2's default QoS."""
-        topic = self._topics[robot]
+        """Make the robot's writer (`rt/<ns>/diagnostics_agg` or the shared topic), ROS 2's default QoS."""
+        topic = self._shared or self._topics[robot]
         if topic is None:
             topic_name = dds_topic_name(self._names[robot], AGGREGATED)
             topic = Topic(self._participant, topic_name, DdsDiagnosticArray, qos=ROS_DEFAULT_QOS)
@@ -198,6 +226,19 @@ class DdsWire:
     def close(self, robot: int) -> None:
         """Delete the robot's writer (its last reference), as a robot whose process ended."""
         self._writers[robot] = self._refs[robot] = None
+
+    def declared(self) -> None:
+        """With the shared topic, write the graph: each open robot's node and its writer."""
+        if self._graph is None:
+            return
+        nodes = tuple(
+            NodeEntities(f"/{name}", UPDATER_NODE, (writer.guid.bytes,))
+            for name, writer in zip(self._names, self._writers, strict=True)
+            if writer is not None
+        )
+        payload = encode_participant_entities(ParticipantEntities(self._participant.guid.bytes, nodes))
+        if ddspy_write(self._graph._ref, payload + b"\x00" * (-len(payload) & 3)) < 0:
+            self.failed += 1
 
     def publish(self, first: int, stop: int, payloads: Sequence[bytearray], stamp: bytes) -> int:
         """Write each open robot's payload as it is; refusals are counted in `failed`."""

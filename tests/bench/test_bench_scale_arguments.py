@@ -26,6 +26,7 @@ from bench.bench_scale import main
         (["--head-start=-0.5"], "--head-start: must be a finite number of seconds, not negative, got -0.5"),
         (["--head-start=nan"], "--head-start: must be a finite number of seconds, not negative, got nan"),
         (["--floor", "--transport=dds"], "--floor: its counting subscriber hears the fleet through"),
+        (["--dds-shared-topic"], "--dds-shared-topic: needs --transport dds"),
         (["--prometheus-agent"], "--prometheus-agent: needs --prometheus-seconds"),
         (["--shards=0"], "--shards: must be from 1 to 8, got 0"),
         (["--shards=9"], "--shards: must be from 1 to 8, got 9"),

@@ -168,6 +168,16 @@ def test_robots_go_down_at_the_asked_share_a_minute_and_come_back_after_their_do
     assert fleet.down == set(went[8:])
 
 
+def test_the_wire_is_told_when_the_fleet_is_declared_and_after_each_second_robots_went_or_came() -> None:
+    wire = RecordingWire()
+    shape = FleetShape(robots=60, components=10, down_share=1.0, down_seconds=1.0)  # one robot a second
+    LoadGenerator(LoadSettings(shape, rate=2.0, duration=3.5), wire).run()
+    assert wire.declarations[0] == set(range(60))  # before the first publication, once for the fleet
+    changes = wire.declarations[1:]
+    assert 2 <= len(changes) <= 8  # one a second that changed, not one per open or close
+    assert all(len(open_robots) in (58, 59) for open_robots in changes)
+
+
 def test_the_live_profile_changes_every_status_at_every_publication() -> None:
     fleet = Fleet(FleetShape(robots=3, profile=LIVE))
     before = [bytes(p) for p in fleet.payloads]
@@ -205,6 +215,7 @@ class RecordingWire:
         """Nothing sent yet."""
         self.sent: list[tuple[int, bytes]] = []
         self.open_robots: set[int] = set()
+        self.declarations: list[set[int]] = []  # the robots open at each `declared`
 
     def open(self, robot: int) -> None:
         """The robot is up."""
@@ -213,6 +224,10 @@ class RecordingWire:
     def close(self, robot: int) -> None:
         """The robot is down."""
         self.open_robots.discard(robot)
+
+    def declared(self) -> None:
+        """Note which robots were open."""
+        self.declarations.append(set(self.open_robots))
 
     def publish(self, first: int, stop: int, payloads: Sequence[bytearray], stamp: bytes) -> int:
         """Keep each open robot's stamped payload."""
