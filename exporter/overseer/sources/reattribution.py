@@ -12,16 +12,22 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-
-from overseer.model import FleetModel
+from typing import Protocol
 
 FORGET_AFTER_SECONDS = 1.0  # a message taken before the move has long been applied by then
+
+
+class FeedForgetting(Protocol):
+    """Where a moved feed is forgotten: the fleet model, or what hands a source's robots on to it."""
+
+    def forget_feed(self, robot: str, feed: str, last: bool) -> None:
+        """Drop what `feed` told of `robot`; `last`: the source hears `robot` through no other publisher."""
 
 
 class MovedFeeds:
     """Feeds that left a robot for another, waiting to be forgotten by the robot they left."""
 
-    def __init__(self, model: FleetModel, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, model: FeedForgetting, clock: Callable[[], float] = time.monotonic) -> None:
         """Forget the moved feeds in `model`, timed by `clock`."""
         self._model = model
         self._clock = clock

@@ -36,10 +36,9 @@ from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from overseer.codec import DecodeError, cdr
+from overseer.codec import DecodeError
 from overseer.config.dds import DdsConfig, DdsPeer, DomainConfig
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
-from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.dds.cyclone_config import (
@@ -51,6 +50,7 @@ from overseer.sources.dds.cyclone_config import (
 from overseer.sources.dds.cyclone_log import CycloneWarnings
 from overseer.sources.dds.node_graph import NodeGraph
 from overseer.sources.dds.peers import peer_addresses
+from overseer.sources.dds.sink import TRANSPORT, DdsSink, Ingest, ModelSink
 from overseer.sources.dds.types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
@@ -58,7 +58,6 @@ from overseer.sources.topic_names import AGGREGATED, RAW, parse_dds_topic
 
 log = logging.getLogger(__name__)
 
-TRANSPORT = "dds"
 DISCOVERY_INTERVAL_SECONDS = 0.2
 # How long a writer of an un-namespaced topic waits for its node to appear in the graph before it is taken
 # for the domain's robot (a DDS application that is no ROS 2 node never appears there). Fast DDS sends a
@@ -89,7 +88,7 @@ class _Writer:
     guid: bytes
     robot: str | None
     seen_at: float  # monotonic
-    ingest: PayloadIngest | None = None
+    ingest: Ingest | None = None
     ignored: bool = False  # another worker's robot, the robot cap, or raw beside aggregated
     pending: list[bytes] = field(default_factory=list)  # samples heard before its robot was known
     by_domain: bool = False  # the domain's robot's, as its node was not in the graph within the grace
@@ -116,20 +115,23 @@ class DdsSource:
     def __init__(
         self,
         config: DdsConfig,
-        model: FleetModel,
+        model: FleetModel | DdsSink,
         shard: Shard | None = None,
         namespace_depth: int = DEFAULT_NAMESPACE_DEPTH,
     ) -> None:
-        """Feed `model` from the domains in `config`, following only `shard`'s robots; joins on `start`."""
+        """Feed `model` from the domains in `config`, following only `shard`'s robots; joins on `start`.
+
+        `model` is the fleet model of this process, or a sink that hands the robots on (`relay.py`).
+        """
         self._config = config
-        self._model = model
+        self._model: DdsSink = ModelSink(model) if isinstance(model, FleetModel) else model
         self._shard = shard or Shard()
         self._namespace_depth = namespace_depth
         self._sessions: list[_DomainSession] = []
         self._lock = threading.Lock()  # the writers' pending samples and ingests, between listener threads
         self._robot_writers: dict[str, list[_Writer]] = {}  # robot → its live writers, across domains
         self._aggregated: set[str] = set()  # robots read from diagnostics_agg only
-        self._moved = MovedFeeds(model)
+        self._moved = MovedFeeds(self._model)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -272,6 +274,7 @@ class DdsSource:
             followed, writer.ingest, writer.ignored = writer.ingest is not None, None, False
         self._drop_writer(old, writer)
         if followed:
+            self._model.released(old, writer.topic, _feed_name(writer))
             self._moved.moved(old, _feed_name(writer))
         log.info("writer %s of %s: a node of robot %s, not %s", writer.guid.hex(), writer.topic, robot, old)
         self._adopt(writer, robot)
@@ -295,7 +298,7 @@ class DdsSource:
             self._aggregated.add(robot)
             self._ignore_raw(robot)
         feed = _feed_name(writer)
-        ingest = PayloadIngest(self._model, robot, TRANSPORT, writer.topic, cdr.WIRE_FORMAT, feed)
+        ingest = self._model.ingest(robot, writer.topic, feed)
         while True:  # what arrived meanwhile, in order, before new samples go straight to the ingest
             with self._lock:
                 pending, writer.pending = writer.pending, []
@@ -310,7 +313,9 @@ class DdsSource:
         """Leave a robot's raw diagnostics writers once it has an aggregator: forget what they said."""
         for writer in self._robot_writers.get(robot, []):
             if writer.kind == RAW and not writer.ignored:
-                writer.ignored, writer.ingest = True, None
+                followed, writer.ignored, writer.ingest = writer.ingest is not None, True, None
+                if followed:
+                    self._model.released(robot, writer.topic, _feed_name(writer))
                 self._model.forget_topic(robot, writer.topic)
 
     def _writer_left(self, session: _DomainSession, handle: int) -> None:
@@ -320,6 +325,8 @@ class DdsSource:
         if writer is None or writer.robot is None:
             return
         robot = writer.robot
+        if writer.ingest is not None:
+            self._model.released(robot, writer.topic, _feed_name(writer))
         if self._drop_writer(robot, writer) and self._shard.owns(robot):
             self._model.publisher_left(robot)
             log.info("robot %s: its last diagnostics writer left", robot)
@@ -388,7 +395,7 @@ class DdsSource:
 
         return on_data_available
 
-    def _hold(self, session: _DomainSession, handle: int, topic: str, data: bytes) -> PayloadIngest | None:
+    def _hold(self, session: _DomainSession, handle: int, topic: str, data: bytes) -> Ingest | None:
         """Keep a sample whose writer's robot is not known yet; its ingest when it became known meanwhile."""
         with self._lock:
             writer = session.writers.get(handle)
@@ -408,7 +415,7 @@ def _feed_name(writer: _Writer) -> str:
     return f"{writer.topic}@{writer.guid.hex()}"
 
 
-def _ingest(ingest: PayloadIngest, payload: bytes, topic: str) -> None:
+def _ingest(ingest: Ingest, payload: bytes, topic: str) -> None:
     try:
         ingest(payload)
     except DecodeError as error:
