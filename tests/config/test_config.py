@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import socket
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -197,8 +198,8 @@ def test_bad_ingest_workers_name_the_key_and_the_range(value: object) -> None:
 
 
 @pytest.mark.servers
-def test_run_with_a_worker_that_cannot_start_exits_nonzero_naming_the_worker(tmp_path: Path) -> None:
-    """Two workers on one fixed participant index (real Cyclone DDS): the second to bind cannot join."""
+def test_run_whose_dds_participant_cannot_join_exits_nonzero_naming_the_transport(tmp_path: Path) -> None:
+    """A fixed participant index another participant holds (real Cyclone DDS): the exporter's cannot bind."""
     fixed_index = (
         '<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
         "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>7</ParticipantIndex>"
@@ -207,21 +208,38 @@ def test_run_with_a_worker_that_cannot_start_exits_nonzero_naming_the_worker(tmp
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    result = subprocess.run(
+    holder = subprocess.Popen(
         [
-            *overseer_command(),
-            "run",
-            f"--web.listen-address=127.0.0.1:{port}",
-            "--dds.domain=97",
-            f"--dds.cyclonedds-uri={fixed_index}",
-            "--ingest.workers=2",
+            sys.executable,
+            "-c",
+            "import sys, time; from cyclonedds.domain import Domain, DomainParticipant; "
+            f"d = Domain(97, {fixed_index!r}); p = DomainParticipant(97); print('joined', flush=True); "
+            "sys.stdin.read()",
         ],
-        capture_output=True,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
         text=True,
-        timeout=60,
-        cwd=tmp_path,
     )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "joined\n"
+        result = subprocess.run(
+            [
+                *overseer_command(),
+                "run",
+                f"--web.listen-address=127.0.0.1:{port}",
+                "--dds.domain=97",
+                f"--dds.cyclonedds-uri={fixed_index}",
+                "--ingest.workers=2",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=tmp_path,
+        )
+    finally:
+        holder.kill()
+        holder.wait()
     assert result.returncode == 1
-    # Whichever worker binds the index second fails; the exporter names it and the error in one line.
+    # The exporter's own participant relays the workers their robots: it names DDS and the error in one line.
     last = result.stderr.splitlines()[-1]
-    assert re.fullmatch(r"overseer run: ingest worker [01] could not start: DDSException: .+", last), last
+    assert re.fullmatch(r"overseer run: dds could not start: DDSException: .+", last), last

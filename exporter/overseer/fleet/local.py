@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from typing import Any
 
 from prometheus_client.registry import Collector
@@ -71,14 +71,14 @@ class LocalFleet:
         config: Config,
         events: EventSink | None = None,
         start: FleetStart | None = None,
-        zenoh_relayed: RelayedFeed | None = None,
+        relayed: Mapping[str, RelayedFeed] | None = None,
         robot_cap: RobotCap | None = None,
     ) -> LocalFleet:
         """The fleet `config` describes: its model, the transports it enables, its renderer; not started.
 
         `events`, when given, receives the model's transitions (level changes as they are applied, and
         what time decides, checked every second); `start` says what it follows before it hears anything;
-        `zenoh_relayed` is what an ingest worker reads from the exporter's Zenoh relay, and `robot_cap` its
+        `relayed` what an ingest worker reads from the exporter's relays, by transport, and `robot_cap` its
         count of robots against the whole fleet's cap.
         """
         model = FleetModel(config.fleet, robot_cap=robot_cap)
@@ -87,7 +87,7 @@ class LocalFleet:
         exposition = FleetExposition(
             model, metrics.value_key_pattern, messages=messages, level_changes=metrics.level_changes
         )
-        sources = build_sources(config, model, zenoh_relayed)
+        sources = build_sources(config, model, relayed)
         return cls(model, sources, exposition, events, start, config.shard)
 
     def start(self) -> None:

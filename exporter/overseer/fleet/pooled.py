@@ -26,9 +26,10 @@ from overseer.fleet.workers.merge import (
     part_counters,
 )
 from overseer.fleet.workers.metrics import WorkerPoolCollector
-from overseer.fleet.workers.pool import WorkerPool, WorkersUnavailable
+from overseer.fleet.workers.pool import WorkerPool, WorkerStartError, WorkersUnavailable
 from overseer.model import FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import PackedRowSink
+from overseer.sources.dds.relay import DdsRelay
 from overseer.sources.zenoh.relay import ZenohRelay
 
 SNAPSHOT_REUSE_SECONDS = 1.0
@@ -48,15 +49,16 @@ class PooledFleet:
     ) -> None:
         """Prepare the pool; no worker runs until `start`. `start` says what a worker follows at first.
 
-        Over Zenoh the exporter's own session relays each worker its robots' samples (`ZenohRelay`).
+        The exporter's own DDS participants and Zenoh session relay each worker its robots' samples
+        (`DdsRelay`, `ZenohRelay`).
         """
         count = config.ingest.workers
-        self.relay = (
-            ZenohRelay(config.zenoh, config.shard, count, config.robot_namespace_depth)
-            if config.zenoh.enabled
-            else None
-        )
-        self.pool = WorkerPool(config, events, start, self.relay)
+        self.relays: dict[str, DdsRelay | ZenohRelay] = {}
+        if config.dds.enabled:
+            self.relays["dds"] = DdsRelay(config.dds, config.shard, count, config.robot_namespace_depth)
+        if config.zenoh.enabled:
+            self.relays["zenoh"] = ZenohRelay(config.zenoh, config.shard, count, config.robot_namespace_depth)
+        self.pool = WorkerPool(config, events, start, self.relays)
         self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
         self._counters = CounterCarry(self.pool.count)
         self._last_digests: tuple[float, dict[str, int | None]] | None = None
@@ -68,17 +70,27 @@ class PooledFleet:
         except Exception:
             self.pool.stop()
             raise
-        if self.relay is not None:
-            self.relay.start()
+        started: list[DdsRelay | ZenohRelay] = []
+        for transport, relay in self.relays.items():
+            try:
+                relay.start()
+            except Exception as error:  # a DDS configuration Cyclone refuses, say
+                for other in started:
+                    other.stop()
+                self.pool.stop()
+                raise WorkerStartError(
+                    f"{transport} could not start: {type(error).__name__}: {error}"
+                ) from error
+            started.append(relay)
 
     def prepare_stop(self) -> None:
         """Restart no worker from now on: the exporter is stopping (and may see its workers end first)."""
         self.pool.prepare_stop()
 
     def stop(self) -> None:
-        """Stop every worker (and the Zenoh session that relays them their samples first)."""
-        if self.relay is not None:
-            self.relay.stop()
+        """Stop every worker, after the DDS participants and Zenoh session that relay them their samples."""
+        for relay in self.relays.values():
+            relay.stop()
         self.pool.stop()
 
     def robot_digests(self) -> dict[str, int | None]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
@@ -35,14 +36,20 @@ def enabled_transports(config: Config) -> list[str]:
 
 
 def build_sources(
-    config: Config, model: FleetModel, zenoh_relayed: RelayedFeed | None = None
+    config: Config, model: FleetModel, relayed: Mapping[str, RelayedFeed] | None = None
 ) -> list[Source]:
     """The transports `config` enables, feeding `model` with the robots of `config.shard`; not started.
 
-    `zenoh_relayed`: what an ingest worker reads from the exporter's Zenoh relay, instead of a session.
+    `relayed`: by transport ("dds", "zenoh"), what an ingest worker reads from the exporter's relay of
+    that transport, instead of a participant or session of its own.
     """
+    relayed = relayed or {}
     sources: list[Source] = []
-    if config.dds.enabled:
+    if config.dds.enabled and "dds" in relayed:
+        from overseer.sources.dds.relayed import RelayedDdsSource
+
+        sources.append(RelayedDdsSource(model, relayed["dds"]))
+    elif config.dds.enabled:
         from overseer.sources.dds.source import DdsSource
 
         sources.append(DdsSource(config.dds, model, config.shard, config.robot_namespace_depth))
@@ -51,11 +58,11 @@ def build_sources(
 
         robots = tuple(robot for robot in config.ros1.robots if config.shard.owns(robot.name))
         sources.append(Ros1Source(replace(config.ros1, robots=robots), model))
-    if config.zenoh.enabled and zenoh_relayed is not None:
+    if config.zenoh.enabled and "zenoh" in relayed:
         from overseer.sources.zenoh.relayed import RelayedZenohSource
 
         depth = config.robot_namespace_depth
-        sources.append(RelayedZenohSource(config.zenoh, model, config.shard, zenoh_relayed, depth))
+        sources.append(RelayedZenohSource(config.zenoh, model, config.shard, relayed["zenoh"], depth))
     elif config.zenoh.enabled:
         from overseer.sources.zenoh.source import ZenohSource
 

@@ -9,10 +9,10 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, Pipe
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 from overseer.config import Config
 from overseer.fleet.interface import FleetPartUnavailable, FleetStart
@@ -21,7 +21,6 @@ from overseer.fleet.workers.launch import ChildProcess, start_child
 from overseer.fleet.workers.process import FAILED, READY, run_worker
 from overseer.fleet.workers.shared_counts import SharedCounts
 from overseer.model.events import PackedRowSink
-from overseer.sources.zenoh.relay import ZenohRelay
 from overseer.sources.zenoh.relay_items import RelayedFeed
 from overseer.sources.zenoh.shared_ring import SUPPORTED as SHARED_RING_SUPPORTED
 from overseer.sources.zenoh.shared_ring import SharedRing
@@ -32,6 +31,13 @@ START_TIMEOUT_SECONDS = 60.0
 ANSWER_TIMEOUT_SECONDS = 30.0  # a worker that takes longer to answer is taken for hung and restarted
 SUPERVISE_INTERVAL_SECONDS = 0.2
 RESTART_DELAY_SECONDS = 1.0  # at most one restart a second per worker, so a crashing one cannot spin
+
+
+class Relay(Protocol):
+    """What hands a transport's samples from the exporter's process to each worker (DDS's, Zenoh's)."""
+
+    def attach(self, worker: int, feed: RelayedFeed) -> None:
+        """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
 
 
 class Answer(NamedTuple):
@@ -71,20 +77,20 @@ class WorkerPool:
         config: Config,
         events: PackedRowSink | None = None,
         start: Callable[[], FleetStart] | None = None,
-        relay: ZenohRelay | None = None,
+        relays: Mapping[str, Relay] | None = None,
     ) -> None:
         """Prepare the workers of `config`; `events` receives every worker's events, packed (None: dropped).
 
         `start` tells what a worker follows before it hears anything, asked anew for each worker started
-        (a restarted worker follows the inventory and the robots remembered now); `relay`, when given,
-        sends each worker started its Zenoh robots' samples.
+        (a restarted worker follows the inventory and the robots remembered now); `relays`, by transport,
+        send each worker started its robots' samples of that transport.
         """
         self.config = config
         self._start = start or FleetStart
         self.count = config.ingest.workers
         self.restarts = [0] * self.count
         self._events = events
-        self._relay = relay
+        self._relays = dict(relays or {})
         self._robot_counts = SharedCounts.create(self.count)  # each worker's robots, against the cap
         self._handles: list[_Handle | None] = [None] * self.count
         self._died_at = [0.0] * self.count
@@ -216,13 +222,18 @@ class WorkerPool:
 
     def _spawn(self, index: int) -> _Handle:
         made: list[Connection] = []  # every pipe end made, closed again if the worker cannot be started
-        ring: SharedRing | None = None  # the relayed samples' payloads, with the relay's pipe
+        rings: list[SharedRing] = []  # the relayed samples' payloads, with each relay's pipe
+        # By transport, (the worker's end, the relay's end): the worker reads its robots' samples.
+        feeds: dict[str, tuple[RelayedFeed, RelayedFeed]] = {}
         try:
             requests, child_requests = _pipe(made)
             events, child_events = _pipe(made, duplex=False)
-            # (read end, write end): the worker reads its Zenoh robots' samples, the relay writes them
-            relayed, relay_writer = _pipe(made, duplex=False) if self._relay else (None, None)
-            ring = SharedRing.create() if self._relay and SHARED_RING_SUPPORTED else None
+            for transport in self._relays:
+                relayed, relay_writer = _pipe(made, duplex=False)
+                ring = SharedRing.create() if SHARED_RING_SUPPORTED else None
+                if ring is not None:
+                    rings.append(ring)
+                feeds[transport] = (RelayedFeed(relayed, ring), RelayedFeed(relay_writer, ring))
             arguments = (
                 self.config,
                 index,
@@ -230,23 +241,23 @@ class WorkerPool:
                 child_requests,
                 child_events,
                 self._start(),
-                None if relayed is None else RelayedFeed(relayed, ring),
+                {transport: worker_end for transport, (worker_end, _) in feeds.items()},
                 self._robot_counts,
             )
             process = start_child(run_worker, arguments)
         except (OSError, RuntimeError) as error:  # out of memory, descriptors or threads
             for end in made:
                 end.close()
-            if ring is not None:
+            for ring in rings:
                 ring.close()
             raise WorkerStartError(f"ingest worker {index} could not be started: {error}") from error
         child_requests.close()
         child_events.close()
-        if self._relay is not None and relayed is not None and relay_writer is not None:
-            relayed.close()
-            if ring is not None:
-                ring.close()  # its memory stays mapped, here and in the worker
-            self._relay.attach(index, RelayedFeed(relay_writer, ring))
+        for ring in rings:
+            ring.close()  # its memory stays mapped, here and in the worker
+        for transport, (worker_end, relay_end) in feeds.items():
+            worker_end.connection.close()
+            self._relays[transport].attach(index, relay_end)
         handle = _Handle(index, self.restarts[index], process, requests, events)
         self._handles[index] = handle
         threading.Thread(

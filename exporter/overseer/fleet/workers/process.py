@@ -83,13 +83,14 @@ def run_worker(
     requests: Connection,
     events: Connection,
     start: FleetStart | None = None,
-    zenoh_relayed: RelayedFeed | None = None,
+    relayed: dict[str, RelayedFeed] | None = None,
     robot_counts: SharedCounts | None = None,
 ) -> NoReturn:
     """The worker process: start following its robots, then answer requests until the exporter leaves.
 
     `start` is what it follows before it hears anything (its share of it: the robots it owns);
-    `zenoh_relayed` the pipe (and ring) its Zenoh robots' samples come down from the exporter's session;
+    `relayed` the pipe (and ring) its robots' samples come down from the exporter's DDS participant or
+    Zenoh session, by transport;
     `robot_counts` every worker's robots, one slot each, against `fleet.max_robots`. Once its
     fleet has stopped, the process ends at once, without the interpreter's shutdown: that shutdown can
     hang (a DDS entity's finalizer waits for a listener thread that waits for the interpreter), and a
@@ -100,7 +101,7 @@ def run_worker(
     trim_heap_every()
     status = 1
     try:
-        status = _serve(config, worker, workers, requests, events, start, zenoh_relayed, robot_counts)
+        status = _serve(config, worker, workers, requests, events, start, relayed, robot_counts)
     except BaseException:  # whatever ends it (the exporter gone, a signal): `_exit` would say nothing
         log.exception("ingest worker %d ended", worker)
     finally:
@@ -115,7 +116,7 @@ def _serve(
     requests: Connection,
     events: Connection,
     start: FleetStart | None,
-    zenoh_relayed: RelayedFeed | None,
+    relayed: dict[str, RelayedFeed] | None,
     robot_counts: SharedCounts | None,
 ) -> int:
     """Follow this worker's robots and answer requests until the exporter leaves; the exit status."""
@@ -132,7 +133,7 @@ def _serve(
             if robot_counts is None
             else SharedRobotCap(config.fleet.max_robots, robot_counts.slots, worker)
         )
-        fleet = LocalFleet.build(config, sink, start, zenoh_relayed, cap)
+        fleet = LocalFleet.build(config, sink, start, relayed, cap)
         fleet.start()
     except Exception as error:  # told to the exporter, which fails its start with it
         log.exception("ingest worker %d failed to start", worker)

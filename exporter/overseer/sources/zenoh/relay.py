@@ -66,14 +66,14 @@ class ZenohRelay:
     def attach(self, worker: int, feed: RelayedFeed) -> None:
         """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
         connection = feed.connection
-        outbox = Outbox(self._config.queue_length, _sender(feed), f"zenoh-relay-{worker}")
+        outbox = Outbox(self._config.queue_length, relay_sender(feed), f"zenoh-relay-{worker}")
         outbox.start()
         with self._lock:
             for key in self._live:
                 outbox.put((TOKEN, key, True))
             old, self._outboxes[worker] = self._outboxes[worker], outbox
             old_connection, self._connections[worker] = self._connections[worker], connection
-        _close(old, old_connection)
+        close_relay(old, old_connection)
 
     def start(self) -> None:
         """Open the session in the background."""
@@ -86,7 +86,7 @@ class ZenohRelay:
             outboxes, self._outboxes = self._outboxes, [None] * len(self._outboxes)
             connections, self._connections = self._connections, [None] * len(self._connections)
         for outbox, connection in zip(outboxes, connections, strict=True):
-            _close(outbox, connection)
+            close_relay(outbox, connection)
 
     def on_sample(self, key: str, attachment: bytes | None, payload: bytes) -> None:
         """Hand one sample to the worker of its robot (to every worker while its robot is not known)."""
@@ -151,8 +151,8 @@ class ZenohRelay:
             outbox.put((ERROR, "router_unreachable"))
 
 
-def _sender(feed: RelayedFeed) -> Deliver:
-    """Sends a batch down a worker's pipe; False once the worker is gone (the pool starts it again)."""
+def relay_sender(feed: RelayedFeed) -> Deliver:
+    """Sends a batch down a worker's pipe and ring; False once the worker is gone (the pool restarts it)."""
     connection, ring = feed.connection, feed.ring
 
     def send(batch: list[Item]) -> bool:
@@ -166,7 +166,7 @@ def _sender(feed: RelayedFeed) -> Deliver:
     return send
 
 
-def _close(outbox: Outbox | None, connection: Connection | None) -> None:
+def close_relay(outbox: Outbox | None, connection: Connection | None) -> None:
     """Stop relaying to a worker, and close its pipe: the worker reads to its end."""
     if outbox is not None:
         outbox.close()

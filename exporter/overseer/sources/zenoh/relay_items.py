@@ -1,4 +1,4 @@
-"""What the exporter's Zenoh relay sends an ingest worker: batches of samples, tokens and counts, in order.
+"""What the exporter's relays send an ingest worker: batches of samples, tokens, calls and counts, in order.
 
 A batch is a pickled list of items, each a tuple whose first element says what it is. With a ring of
 shared memory (`shared_ring.py`), the samples' payloads go through the ring and the pickle carries
@@ -19,8 +19,10 @@ SAMPLE = 0  # (SAMPLE, key, attachment or None, payload)
 TOKEN = 1  # (TOKEN, key, alive)
 DROPPED = 2  # (DROPPED, count, [(publisher GID, highest number), ...]): dropped by a full outbox
 ERROR = 3  # (ERROR, reason): an error of the exporter's session, for the worker that counts them
+# The DDS relay's (`dds/relay.py`): a SAMPLE's key is (robot, topic, feed) and it has no attachment, and
+CALL = 4  # (CALL, method, arguments): a call of the worker's model by the exporter's DDS source
 
-Item = tuple[Any, ...]  # one of the four above, its kind first
+Item = tuple[Any, ...]  # one of the five above, its kind first
 
 
 @dataclass(frozen=True)
