@@ -260,7 +260,7 @@ def wiring(transport: str, directory: Path, shared_topic: bool = False) -> Itera
     """A Zenoh router for both sides, or a fresh DDS domain on loopback (robots on `/diagnostics`: shared)."""
     if transport == DDS:
         domain = fresh_domain_id()
-        shared = ("--dds.shared-topic",) if shared_topic else ()
+        shared = ("--dds-shared-topic",) if shared_topic else ()
         yield Wiring((), ("--transport=dds", f"--domain={domain}", *shared), domain)  # Zenoh off unless asked
         return
     with running_router_process(directory) as (port, router):

@@ -301,7 +301,7 @@ def add_wire_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id (default 0)")
     parser.add_argument(
-        "--dds.shared-topic",
+        "--dds-shared-topic",
         dest="dds_shared_topic",
         action="store_true",
         help="DDS: every robot writes the absolute /diagnostics, its node named in the ROS graph, as "

@@ -56,7 +56,7 @@ def test_robots_on_the_one_dds_diagnostics_topic_are_named_by_their_nodes_across
                 "--namespace-prefix=lg",
                 "--transport=dds",
                 f"--domain={domain}",
-                "--dds.shared-topic",
+                "--dds-shared-topic",
                 "--wait-for-subscribers=60",
             ],
             tmp_path,

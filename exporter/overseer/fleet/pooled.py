@@ -26,11 +26,9 @@ from overseer.fleet.workers.merge import (
     part_counters,
 )
 from overseer.fleet.workers.metrics import WorkerPoolCollector
-from overseer.fleet.workers.pool import WorkerPool, WorkerStartError, WorkersUnavailable
+from overseer.fleet.workers.pool import Relay, WorkerPool, WorkerStartError, WorkersUnavailable
 from overseer.model import FleetSnapshot, Inventory, RememberedRobot
 from overseer.model.events import PackedRowSink
-from overseer.sources.dds.relay import DdsRelay
-from overseer.sources.zenoh.relay import ZenohRelay
 
 SNAPSHOT_REUSE_SECONDS = 1.0
 
@@ -53,10 +51,14 @@ class PooledFleet:
         (`DdsRelay`, `ZenohRelay`).
         """
         count = config.ingest.workers
-        self.relays: dict[str, DdsRelay | ZenohRelay] = {}
-        if config.dds.enabled:
+        self.relays: dict[str, Relay] = {}
+        if config.dds.enabled:  # the middleware loads only when enabled
+            from overseer.sources.dds.relay import DdsRelay
+
             self.relays["dds"] = DdsRelay(config.dds, config.shard, count, config.robot_namespace_depth)
         if config.zenoh.enabled:
+            from overseer.sources.zenoh.relay import ZenohRelay
+
             self.relays["zenoh"] = ZenohRelay(config.zenoh, config.shard, count, config.robot_namespace_depth)
         self.pool = WorkerPool(config, events, start, self.relays)
         self._owners = [config.shard.for_worker(index, self.pool.count) for index in range(self.pool.count)]
@@ -64,24 +66,19 @@ class PooledFleet:
         self._last_digests: tuple[float, dict[str, int | None]] | None = None
 
     def start(self) -> None:
-        """Start every worker; `WorkerStartError` (and nothing left running) when one cannot start."""
+        """Start every worker, then the relays; `WorkerStartError` (and nothing left running) on failure."""
+        starting = ""  # the relay starting, while one does
         try:
             self.pool.start()
-        except Exception:
-            self.pool.stop()
-            raise
-        started: list[DdsRelay | ZenohRelay] = []
-        for transport, relay in self.relays.items():
-            try:
+            for transport, relay in self.relays.items():
+                starting = transport
                 relay.start()
-            except Exception as error:  # a DDS configuration Cyclone refuses, say
-                for other in started:
-                    other.stop()
-                self.pool.stop()
-                raise WorkerStartError(
-                    f"{transport} could not start: {type(error).__name__}: {error}"
-                ) from error
-            started.append(relay)
+        except Exception as error:
+            self.stop()  # every relay (the one that failed too: what it joined), then the workers
+            if not starting:
+                raise
+            # A DDS configuration Cyclone refuses, say: the exporter's own participant could not join.
+            raise WorkerStartError(f"{starting} could not start: {type(error).__name__}: {error}") from error
 
     def prepare_stop(self) -> None:
         """Restart no worker from now on: the exporter is stopping (and may see its workers end first)."""
@@ -89,9 +86,11 @@ class PooledFleet:
 
     def stop(self) -> None:
         """Stop every worker, after the DDS participants and Zenoh session that relay them their samples."""
-        for relay in self.relays.values():
-            relay.stop()
-        self.pool.stop()
+        try:
+            for relay in self.relays.values():
+                relay.stop()
+        finally:
+            self.pool.stop()
 
     def robot_digests(self) -> dict[str, int | None]:
         """Every worker's robots and digests, at most `SNAPSHOT_REUSE_SECONDS` old.

@@ -15,7 +15,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from bench.loadgen import running_loadgen
+from overseer.codec.cdr import encode_diagnostic_array
 from overseer.config.dds import DdsConfig, DomainConfig
+from overseer.messages import DiagnosticArray, DiagnosticStatus
 from overseer.model import FleetModel
 from overseer.model.shard import Shard
 from overseer.sources.dds.relay import DdsRelay
@@ -81,7 +83,7 @@ def test_the_exporters_participant_takes_each_sample_once_and_each_worker_only_i
                 "--namespace-prefix=lg",
                 "--transport=dds",
                 f"--domain={domain}",
-                "--dds.shared-topic",
+                "--dds-shared-topic",
                 "--rate=5",
                 "--wait-for-subscribers=60",
             ],
@@ -126,3 +128,42 @@ def test_the_relayed_source_decodes_samples_makes_the_models_calls_and_refuses_a
     assert robot.name == "robot1" and not model.snapshot().robot_up(robot)
     source.on_items([(SAMPLE, ("robot1", "rt/diagnostics", "feed"), None, b"\x00\x01not an array")])
     assert dict(model.snapshot().message_counts)[("dds", "decode_error")] == 1
+
+
+def status_array(message: str) -> bytes:
+    """A serialized DiagnosticArray with one status saying `message`."""
+    status = DiagnosticStatus(0, "battery", message, "hw", ())
+    return encode_diagnostic_array(DiagnosticArray(0, 0, "", (status,)))
+
+
+def test_a_worker_started_again_is_told_first_which_of_its_robots_have_writers() -> None:
+    relay = DdsRelay(DdsConfig(), Shard(), 1)  # never joined: the test makes the source's calls
+    relay.register("kept", "dds")
+    relay.register("gone", "dds")
+    relay.publisher_left("gone")  # its last writer left before the worker started again
+    reader, writer = multiprocessing.Pipe(duplex=False)
+    ring = SharedRing.create()
+    model = FleetModel()
+    worker = RelayedDdsSource(model, RelayedFeed(reader, ring))
+    relay.attach(0, RelayedFeed(writer, ring))
+    worker.start()
+    try:
+        wait_for(lambda: [r.name for r in model.snapshot().robots] == ["kept"], 10, message="kept registered")
+    finally:
+        relay.stop()
+        worker.stop()
+
+
+def test_a_sample_taken_before_its_writer_was_let_go_of_is_dropped_until_it_is_followed_again() -> None:
+    model = FleetModel()
+    worker = RelayedDdsSource(model, RelayedFeed(multiprocessing.Pipe(duplex=False)[0]))
+    key = ("robot1", "rt/diagnostics", "rt/diagnostics@01")
+    worker.on_items([(SAMPLE, key, None, status_array("first"))])
+    worker.on_items([(CALL, "released", key), (SAMPLE, key, None, status_array("late"))])
+    [robot] = model.snapshot().robots
+    assert [component.message for component in robot.components.values()] == ["first"]
+    # The writer's lease ran out and it came back: the source follows it again, with the same GUID.
+    worker.on_items([(CALL, "followed", key), (SAMPLE, key, None, status_array("again"))])
+    [robot] = model.snapshot().robots
+    assert [component.message for component in robot.components.values()] == ["again"]
+    assert worker.samples_heard == 3

@@ -50,8 +50,10 @@ def receive_answer(connection: Connection, timeout: float) -> Any:
         (length,) = _LENGTH.unpack(_read_exactly(reader, _LENGTH.size, deadline))
         return pickle.loads(_read_exactly(reader, length, deadline))  # written by this exporter's own worker
     finally:
-        reader.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, _NO_DEADLINE)
-        reader.detach()  # the connection keeps its descriptor
+        try:
+            reader.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, _NO_DEADLINE)
+        finally:
+            reader.detach()  # the connection keeps its descriptor
 
 
 def _write_all(descriptor: int, data: bytes) -> None:

@@ -39,6 +39,12 @@ class Relay(Protocol):
     def attach(self, worker: int, feed: RelayedFeed) -> None:
         """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
 
+    def start(self) -> None:
+        """Join the middleware in the background (an error when its configuration is unusable)."""
+
+    def stop(self) -> None:
+        """Leave the middleware, then close every worker's pipe."""
+
 
 class Answer(NamedTuple):
     """One worker's answer: which worker, which of its incarnations (restarts so far), and the value."""
@@ -272,6 +278,10 @@ class WorkerPool:
                     f"ingest worker {handle.index} did not start within {START_TIMEOUT_SECONDS:g}s"
                 )
             status, detail = receive_answer(handle.requests, START_TIMEOUT_SECONDS)
+        except TimeoutError as error:
+            raise WorkerStartError(
+                f"ingest worker {handle.index} stopped halfway through saying it started"
+            ) from error
         except (EOFError, OSError) as error:
             raise WorkerStartError(
                 f"ingest worker {handle.index} exited while starting (exit code {handle.process.exitcode})"

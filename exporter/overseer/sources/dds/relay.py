@@ -10,8 +10,10 @@ in order (`outbox.py`, `relay_items.py`, the payloads through a ring both proces
 `shared_ring.py`). The worker decodes and ingests them (`relayed.py`).
 
 What waits for a worker that is behind is bounded by `QUEUE_LENGTH` samples; beyond it, samples are
-dropped and the worker counts them. A worker started again hears its robots' next samples: the source
-tells it of no robot again, and the model takes a robot's first sample as its discovery.
+dropped and the worker counts them. A worker started again is told first which of its robots have
+writers (registered again, so that the robot cap refuses once what it refused before), then hears their
+next samples. The worker's model keeps the robot cap: the source relays a refused robot's samples all the
+same, and the worker drops them.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from typing import Any
 from overseer.config.dds import DdsConfig
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.model.shard import Shard
-from overseer.sources.dds.sink import Ingest
+from overseer.sources.dds.sink import TRANSPORT, Ingest
 from overseer.sources.dds.source import DdsSource
 from overseer.sources.zenoh.outbox import Outbox
 from overseer.sources.zenoh.relay import close_relay, relay_sender
@@ -50,7 +52,8 @@ class DdsRelay:
         self._workers = workers
         self._outboxes: list[Outbox | None] = [None] * workers
         self._connections: list[Connection | None] = [None] * workers
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # an outbox replaced, against a robot registered meanwhile
+        self._registered: list[set[str]] = [set() for _ in range(workers)]  # robots with writers, by worker
         self.source = DdsSource(config, self, shard, namespace_depth)
 
     def attach(self, worker: int, feed: RelayedFeed) -> None:
@@ -58,6 +61,8 @@ class DdsRelay:
         outbox = Outbox(QUEUE_LENGTH, relay_sender(feed), f"dds-relay-{worker}")
         outbox.start()
         with self._lock:
+            for robot in self._registered[worker]:
+                outbox.put((CALL, "register", (robot, TRANSPORT)))
             old, self._outboxes[worker] = self._outboxes[worker], outbox
             old_connection, self._connections[worker] = self._connections[worker], feed.connection
         close_relay(old, old_connection)
@@ -87,7 +92,10 @@ class DdsRelay:
 
     def register(self, robot: str, transport: str) -> bool:
         """Register the robot in its worker; True: the worker's model keeps its cap (and drops beyond it)."""
-        self._call(self._owner(robot), "register", robot, transport)
+        owner = self._owner(robot)
+        with self._lock:
+            self._registered[owner].add(robot)
+            self._call(owner, "register", robot, transport)
         return True
 
     def forget_topic(self, robot: str, topic: str) -> None:
@@ -100,12 +108,17 @@ class DdsRelay:
 
     def publisher_left(self, robot: str) -> None:
         """Mark the robot down in its worker."""
-        self._call(self._owner(robot), "publisher_left", robot)
+        owner = self._owner(robot)
+        with self._lock:
+            self._registered[owner].discard(robot)
+            self._call(owner, "publisher_left", robot)
 
     def ingest(self, robot: str, topic: str, feed: str) -> Ingest:
         """Send the writer's samples as they are to the worker of `robot`."""
         owner, key = self._owner(robot), (robot, topic, feed)
         outboxes = self._outboxes
+        # A writer whose lease ran out comes back with the same GUID: its feed is followed again.
+        self._call(owner, "followed", robot, topic, feed)
 
         def relay(payload: bytes) -> None:
             outbox = outboxes[owner]

@@ -25,6 +25,9 @@ _CALLS = frozenset(
 )
 
 _FeedKey = tuple[str, str, str]  # (robot, topic, feed)
+# Writers let go of, remembered so that a sample the source took just before is not taken for a new
+# writer, until the source follows the writer again (one whose lease ran out, back with its GUID).
+MAX_RELEASED = 100_000
 
 
 class RelayedDdsSource:
@@ -37,6 +40,7 @@ class RelayedDdsSource:
         self._sink = ModelSink(model)
         self._feed = feed
         self._ingests: dict[_FeedKey, Ingest] = {}
+        self._released: dict[_FeedKey, None] = {}  # in the order they were let go of
         self._refused: set[str] = set()  # robots the model's cap refused: their samples are not taken
         self.samples_heard = 0  # samples the relay sent this worker
         self._stop = threading.Event()
@@ -53,19 +57,22 @@ class RelayedDdsSource:
         """Take one batch: decode each sample into the model, make each call."""
         for item in items:
             kind = item[0]
-            if kind == SAMPLE:
-                self.samples_heard += 1
-                self._take(item[1], item[3])
-            elif kind == CALL:
-                self._call(item[1], item[2])
-            elif kind == DROPPED:
-                self._sink.count_message(TRANSPORT, "dropped", item[1])
+            try:
+                if kind == SAMPLE:
+                    self.samples_heard += 1
+                    self._take(item[1], item[3])
+                elif kind == CALL:
+                    self._call(item[1], item[2])
+                elif kind == DROPPED:
+                    self._sink.count_message(TRANSPORT, "dropped", item[1])
+            except Exception:  # a bug with one item must not lose the rest of the batch
+                log.exception("failed to take a relayed DDS item of kind %s", kind)
 
     def _take(self, key: _FeedKey, payload: bytes) -> None:
         ingest = self._ingests.get(key)
         if ingest is None:
             robot, topic, feed = key
-            if robot in self._refused:
+            if robot in self._refused or key in self._released:
                 return
             ingest = self._ingests[key] = self._sink.ingest(robot, topic, feed)
         try:
@@ -74,8 +81,14 @@ class RelayedDdsSource:
             log.debug("undecodable sample on %s: %s", key[1], error)
 
     def _call(self, method: str, arguments: tuple[Any, ...]) -> None:
+        if method == "followed":
+            self._released.pop(arguments, None)
+            return
         if method == "released":
             self._ingests.pop(arguments, None)
+            self._released[arguments] = None
+            if len(self._released) > MAX_RELEASED:
+                del self._released[next(iter(self._released))]
             return
         if method not in _CALLS:
             log.error("the DDS relay asked for %r, which is no call of the model", method)
@@ -85,9 +98,11 @@ class RelayedDdsSource:
             robot = arguments[0]
             if result:
                 self._refused.discard(robot)
-            else:
+            elif robot not in self._refused:
                 self._refused.add(robot)
                 log.warning("robot cap reached; not following robot %s", robot)
+        elif method == "publisher_left":
+            self._refused.discard(arguments[0])  # a writer of its own again registers it anew
         elif method == "forget_feed":
             robot, feed = arguments[0], arguments[1]
             for key in [key for key in self._ingests if key[0] == robot and key[2] == feed]:
@@ -97,10 +112,12 @@ class RelayedDdsSource:
         connection, ring = self._feed.connection, self._feed.ring
         while not self._stop.is_set():
             try:
-                batch = decode_batch(connection.recv_bytes(), ring)
+                data = connection.recv_bytes()
             except (EOFError, OSError):
                 return  # the exporter is gone or stopping
             try:
-                self.on_items(batch)
-            except Exception:  # a bug in one batch must not end the worker's DDS feed for good
-                log.exception("failed to take a batch of relayed DDS samples")
+                batch = decode_batch(data, ring)
+            except Exception:  # a bug: said, and the worker goes on with the next batch
+                log.exception("could not read a batch of relayed DDS samples")
+                continue
+            self.on_items(batch)

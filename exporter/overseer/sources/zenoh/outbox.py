@@ -65,7 +65,7 @@ class Outbox:
                 return
             if not is_sample and len(self._items) >= self._limit + MAX_TOKENS:
                 if not self._tokens_dropped:  # a flood of tokens to a receiver that is stuck
-                    log.warning("the Zenoh ingest is too far behind: tokens dropped from its queue")
+                    log.warning("an ingest worker is too far behind: tokens or calls dropped from its queue")
                 self._tokens_dropped += 1
                 return
             if is_sample and self._samples >= self._limit:

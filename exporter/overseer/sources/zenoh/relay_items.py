@@ -19,8 +19,8 @@ SAMPLE = 0  # (SAMPLE, key, attachment or None, payload)
 TOKEN = 1  # (TOKEN, key, alive)
 DROPPED = 2  # (DROPPED, count, [(publisher GID, highest number), ...]): dropped by a full outbox
 ERROR = 3  # (ERROR, reason): an error of the exporter's session, for the worker that counts them
-# The DDS relay's (`dds/relay.py`): a SAMPLE's key is (robot, topic, feed) and it has no attachment, and
 CALL = 4  # (CALL, method, arguments): a call of the worker's model by the exporter's DDS source
+# From the DDS relay (`dds/relay.py`) a SAMPLE's key is (robot, topic, feed), with no attachment.
 
 Item = tuple[Any, ...]  # one of the five above, its kind first
 

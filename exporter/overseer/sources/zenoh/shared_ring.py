@@ -33,6 +33,7 @@ HEADER_BYTES = 64  # the reader's position first; the rest keeps the payloads of
 DEFAULT_RING_BYTES = 4 << 20
 _POSITION = struct.Struct("<Q")
 SUPPORTED = platform.machine().lower() in ("x86_64", "amd64")  # see above
+_POPULATE = getattr(mmap, "MAP_POPULATE", 0)  # Linux
 
 
 class SharedRing:
@@ -42,7 +43,9 @@ class SharedRing:
         """Map the ring of `size` bytes in the memory file open as `descriptor` (made by `create`)."""
         self._descriptor = descriptor
         self.size = size
-        self._map = mmap.mmap(descriptor, HEADER_BYTES + size)
+        # Mapped whole at once (MAP_POPULATE): the ring is resident from the start, rather than growing
+        # page by page as the positions first go round it (which looked like a leak for a minute).
+        self._map = mmap.mmap(descriptor, HEADER_BYTES + size, flags=mmap.MAP_SHARED | _POPULATE)
         self._written = 0  # the writer's own position
         self._close = weakref.finalize(self, os.close, descriptor)
 
