@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import threading
-from multiprocessing.connection import Connection
 from typing import Any
 
 from overseer.config.dds import DdsConfig
@@ -28,8 +27,7 @@ from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.model.shard import Shard
 from overseer.sources.dds.sink import TRANSPORT, Ingest
 from overseer.sources.dds.source import DdsSource
-from overseer.sources.zenoh.outbox import Outbox
-from overseer.sources.zenoh.relay import close_relay, relay_sender
+from overseer.sources.zenoh.outbox import WorkerOutboxes
 from overseer.sources.zenoh.relay_items import CALL, SAMPLE, RelayedFeed
 
 log = logging.getLogger(__name__)
@@ -50,22 +48,18 @@ class DdsRelay:
         """Relay the robots of `shard` to its `workers`; nothing is joined until `start`."""
         self._shard = shard
         self._workers = workers
-        self._outboxes: list[Outbox | None] = [None] * workers
-        self._connections: list[Connection | None] = [None] * workers
         self._lock = threading.Lock()  # an outbox replaced, against a robot registered meanwhile
+        self._feeds = WorkerOutboxes(workers, QUEUE_LENGTH, "dds-relay", self._lock)
+        self._outboxes = self._feeds.outboxes
         self._registered: list[set[str]] = [set() for _ in range(workers)]  # robots with writers, by worker
         self.source = DdsSource(config, self, shard, namespace_depth)
 
     def attach(self, worker: int, feed: RelayedFeed) -> None:
         """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
-        outbox = Outbox(QUEUE_LENGTH, relay_sender(feed), f"dds-relay-{worker}")
-        outbox.start()
-        with self._lock:
-            for robot in self._registered[worker]:
-                outbox.put((CALL, "register", (robot, TRANSPORT)))
-            old, self._outboxes[worker] = self._outboxes[worker], outbox
-            old_connection, self._connections[worker] = self._connections[worker], feed.connection
-        close_relay(old, old_connection)
+        registered = self._registered[worker]
+        self._feeds.attach(
+            worker, feed, lambda: [(CALL, "register", (robot, TRANSPORT)) for robot in registered]
+        )
 
     def start(self) -> None:
         """Join the configured domains and start discovering robots (ConfigError, say, when it cannot)."""
@@ -74,11 +68,7 @@ class DdsRelay:
     def stop(self) -> None:
         """Leave the domains, then close every worker's pipe."""
         self.source.stop()
-        with self._lock:
-            outboxes, self._outboxes = self._outboxes, [None] * len(self._outboxes)
-            connections, self._connections = self._connections, [None] * len(self._connections)
-        for outbox, connection in zip(outboxes, connections, strict=True):
-            close_relay(outbox, connection)
+        self._feeds.close()
 
     # The source's calls (`sink.DdsSink`), each handed to the worker of the robot it is about.
 

@@ -18,11 +18,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from multiprocessing.connection import Connection
 
 from overseer.heap_trim import TRIM_AFTER_BACKLOG, trim_heap
 from overseer.sources.zenoh.keys import attachment_fields
-from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item
+from overseer.sources.zenoh.relay_items import DROPPED, SAMPLE, Item, RelayedFeed, encode_batch
 
 log = logging.getLogger(__name__)
 
@@ -114,3 +115,62 @@ class Outbox:
                 trim_heap()
             if not more:
                 time.sleep(BATCH_PAUSE_SECONDS)  # let the next batch gather rather than hand each alone
+
+
+class WorkerOutboxes:
+    """A relay's outbox and pipe for each worker: replaced when the worker starts again, closed at the end.
+
+    `outboxes` is the one list for the relay's lifetime (an entry None while its worker has none), so a
+    hot path may hold it.
+    """
+
+    def __init__(self, workers: int, limit: int, name: str, lock: threading.Lock) -> None:
+        """Outboxes of `limit` samples, their threads named `name`-N; `lock` is the relay's."""
+        self.outboxes: list[Outbox | None] = [None] * workers
+        self._connections: list[Connection | None] = [None] * workers
+        self._limit = limit
+        self._name = name
+        self._lock = lock
+
+    def attach(self, worker: int, feed: RelayedFeed, first: Callable[[], Iterable[Item]]) -> None:
+        """Relay to `worker` through `feed` from now on, `first()`'s items (taken under the lock) first."""
+        outbox = Outbox(self._limit, _sender(feed), f"{self._name}-{worker}")
+        outbox.start()
+        with self._lock:
+            for item in first():
+                outbox.put(item)
+            old, self.outboxes[worker] = self.outboxes[worker], outbox
+            old_connection, self._connections[worker] = self._connections[worker], feed.connection
+        _close(old, old_connection)
+
+    def close(self) -> None:
+        """Relay nothing more: close every outbox and pipe (each worker reads its pipe to the end)."""
+        with self._lock:
+            outboxes, connections = list(self.outboxes), list(self._connections)
+            for worker in range(len(self.outboxes)):
+                self.outboxes[worker] = self._connections[worker] = None
+        for outbox, connection in zip(outboxes, connections, strict=True):
+            _close(outbox, connection)
+
+
+def _sender(feed: RelayedFeed) -> Deliver:
+    """Sends a batch down a worker's pipe and ring; False once the worker is gone (the pool restarts it)."""
+    connection, ring = feed.connection, feed.ring
+
+    def send(batch: list[Item]) -> bool:
+        try:
+            connection.send_bytes(encode_batch(batch, ring))
+        except (OSError, ValueError):
+            log.debug("an ingest worker's pipe closed while samples were relayed to it")
+            return False
+        return True
+
+    return send
+
+
+def _close(outbox: Outbox | None, connection: Connection | None) -> None:
+    """Stop relaying to a worker, and close its pipe."""
+    if outbox is not None:
+        outbox.close()
+    if connection is not None:
+        connection.close()

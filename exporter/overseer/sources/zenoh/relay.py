@@ -20,16 +20,15 @@ from __future__ import annotations
 
 import logging
 import threading
-from multiprocessing.connection import Connection
 
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.config.zenoh import ZenohConfig
 from overseer.model.shard import Shard
 from overseer.sources.robot_naming import RobotNaming
 from overseer.sources.zenoh.keys import RejectedKey, attachment_gid, parse_data_key
-from overseer.sources.zenoh.outbox import Deliver, Outbox
+from overseer.sources.zenoh.outbox import WorkerOutboxes
 from overseer.sources.zenoh.receiver import ZenohReceiver
-from overseer.sources.zenoh.relay_items import ERROR, SAMPLE, TOKEN, Item, RelayedFeed, encode_batch
+from overseer.sources.zenoh.relay_items import ERROR, SAMPLE, TOKEN, RelayedFeed
 from overseer.sources.zenoh.tokens import token_subject
 
 log = logging.getLogger(__name__)
@@ -55,25 +54,17 @@ class ZenohRelay:
         self._shard = shard
         self._workers = workers
         self._naming = RobotNaming(config.unnamespaced_robot, config.robot_name is not None, namespace_depth)
-        self._outboxes: list[Outbox | None] = [None] * workers
-        self._connections: list[Connection | None] = [None] * workers
         self._routes: dict[str, int] = {}
         self._publishers: dict[bytes, str] = {}  # GID → robot, of the tokens alive
         self._live: dict[str, None] = {}  # the tokens alive, in the order they came
         self._lock = threading.Lock()
+        self._feeds = WorkerOutboxes(workers, config.queue_length, "zenoh-relay", self._lock)
+        self._outboxes = self._feeds.outboxes
         self.receiver = ZenohReceiver(config, self.on_sample, self.on_token, self._unreachable, lambda: None)
 
     def attach(self, worker: int, feed: RelayedFeed) -> None:
         """Worker `worker`, started or started again, reads its batches from `feed` from now on."""
-        connection = feed.connection
-        outbox = Outbox(self._config.queue_length, relay_sender(feed), f"zenoh-relay-{worker}")
-        outbox.start()
-        with self._lock:
-            for key in self._live:
-                outbox.put((TOKEN, key, True))
-            old, self._outboxes[worker] = self._outboxes[worker], outbox
-            old_connection, self._connections[worker] = self._connections[worker], connection
-        close_relay(old, old_connection)
+        self._feeds.attach(worker, feed, lambda: [(TOKEN, key, True) for key in self._live])
 
     def start(self) -> None:
         """Open the session in the background."""
@@ -82,11 +73,7 @@ class ZenohRelay:
     def stop(self) -> None:
         """Close the session, then every worker's pipe."""
         self.receiver.stop()
-        with self._lock:
-            outboxes, self._outboxes = self._outboxes, [None] * len(self._outboxes)
-            connections, self._connections = self._connections, [None] * len(self._connections)
-        for outbox, connection in zip(outboxes, connections, strict=True):
-            close_relay(outbox, connection)
+        self._feeds.close()
 
     def on_sample(self, key: str, attachment: bytes | None, payload: bytes) -> None:
         """Hand one sample to the worker of its robot (to every worker while its robot is not known)."""
@@ -149,26 +136,3 @@ class ZenohRelay:
         outbox = self._outboxes[0]
         if outbox is not None:
             outbox.put((ERROR, "router_unreachable"))
-
-
-def relay_sender(feed: RelayedFeed) -> Deliver:
-    """Sends a batch down a worker's pipe and ring; False once the worker is gone (the pool restarts it)."""
-    connection, ring = feed.connection, feed.ring
-
-    def send(batch: list[Item]) -> bool:
-        try:
-            connection.send_bytes(encode_batch(batch, ring))
-        except (OSError, ValueError):
-            log.debug("an ingest worker's pipe closed while samples were relayed to it")
-            return False
-        return True
-
-    return send
-
-
-def close_relay(outbox: Outbox | None, connection: Connection | None) -> None:
-    """Stop relaying to a worker, and close its pipe: the worker reads to its end."""
-    if outbox is not None:
-        outbox.close()
-    if connection is not None:
-        connection.close()
