@@ -12,14 +12,13 @@ import logging
 import threading
 from typing import Any
 
-from overseer.codec import DecodeError
 from overseer.model import FleetModel
-from overseer.sources.dds.sink import TRANSPORT, Ingest, ModelSink
+from overseer.sources.dds.sink import TRANSPORT, Ingest, ModelSink, take_sample
 from overseer.sources.zenoh.relay_items import CALL, DROPPED, SAMPLE, Item, RelayedFeed, decode_batch
 
 log = logging.getLogger(__name__)
 
-# The model's calls the exporter's DDS source may make (`sink.DdsSink`), and what they take.
+# The model's calls the exporter's DDS source may make (`sink.DdsSink`); the relay adds its own two.
 _CALLS = frozenset(
     {"count_message", "count_source_error", "register", "forget_topic", "forget_feed", "publisher_left"}
 )
@@ -75,10 +74,7 @@ class RelayedDdsSource:
             if robot in self._refused or key in self._released:
                 return
             ingest = self._ingests[key] = self._sink.ingest(robot, topic, feed)
-        try:
-            ingest(payload)
-        except DecodeError as error:
-            log.debug("undecodable sample on %s: %s", key[1], error)
+        take_sample(ingest, payload, key[1])
 
     def _call(self, method: str, arguments: tuple[Any, ...]) -> None:
         if method == "followed":

@@ -7,12 +7,15 @@ one ingest per writer it follows, which takes that writer's serialized samples.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from typing import Protocol
 
-from overseer.codec import cdr
+from overseer.codec import DecodeError, cdr
 from overseer.ingest.payload import PayloadIngest
 from overseer.model import FleetModel
+
+log = logging.getLogger(__name__)
 
 TRANSPORT = "dds"
 
@@ -84,3 +87,11 @@ class ModelSink:
 
     def released(self, robot: str, topic: str, feed: str) -> None:
         """Nothing: the ingest goes with the writer that held it."""
+
+
+def take_sample(ingest: Ingest, payload: bytes, topic: str) -> None:
+    """Hand one sample of `topic` to its writer's ingest; one that does not decode is counted and said."""
+    try:
+        ingest(payload)
+    except DecodeError as error:
+        log.debug("undecodable sample on %s: %s", topic, error)

@@ -36,7 +36,6 @@ from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from overseer.codec import DecodeError
 from overseer.config.dds import DdsConfig, DdsPeer, DomainConfig
 from overseer.config.fleet import DEFAULT_NAMESPACE_DEPTH
 from overseer.model import FleetModel
@@ -50,7 +49,7 @@ from overseer.sources.dds.cyclone_config import (
 from overseer.sources.dds.cyclone_log import CycloneWarnings
 from overseer.sources.dds.node_graph import NodeGraph
 from overseer.sources.dds.peers import peer_addresses
-from overseer.sources.dds.sink import TRANSPORT, DdsSink, Ingest, ModelSink
+from overseer.sources.dds.sink import TRANSPORT, DdsSink, Ingest, ModelSink, take_sample
 from overseer.sources.dds.types import DIAGNOSTIC_ARRAY_TYPE_NAME, DiagnosticArray
 from overseer.sources.reattribution import MovedFeeds
 from overseer.sources.robot_naming import RobotNaming
@@ -306,7 +305,7 @@ class DdsSource:
                     writer.ingest = ingest
                     break
             for payload in pending:
-                _ingest(ingest, payload, writer.topic)
+                take_sample(ingest, payload, writer.topic)
         log.info("following robot %s (%s, writer %s)", robot, writer.topic, writer.guid.hex())
 
     def _ignore_raw(self, robot: str) -> None:
@@ -387,7 +386,7 @@ class DdsSource:
                         if ingest is None:
                             ingest = self._hold(session, info.publication_handle, topic_name, data)
                         if ingest is not None:
-                            _ingest(ingest, data, topic_name)
+                            take_sample(ingest, data, topic_name)
                     if len(samples) < _TAKE_BATCH:
                         return
             except Exception:  # a callback from the DDS thread must never raise
@@ -413,10 +412,3 @@ class DdsSource:
 def _feed_name(writer: _Writer) -> str:
     """The feed a writer's samples are of in the model: one per writer of a topic."""
     return f"{writer.topic}@{writer.guid.hex()}"
-
-
-def _ingest(ingest: Ingest, payload: bytes, topic: str) -> None:
-    try:
-        ingest(payload)
-    except DecodeError as error:
-        log.debug("undecodable sample on %s: %s", topic, error)
